@@ -1,0 +1,153 @@
+"""Vectorised rigid-body helpers (numpy), in GTSAM's conventions.
+
+Poses are 4x4 homogeneous matrices ``T_a_b`` mapping b-frame points into frame a; stacks of
+poses are ``(..., 4, 4)``. Tangent vectors are ``[omega, v]`` (rotation first) and
+perturbations are on the right, ``T * Exp(xi)``, as for ``gtsam.Pose3``. Quaternions are
+``[w, x, y, z]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
+
+Array = NDArray[np.float64]
+
+_SMALL = 1e-8
+
+
+def skew(v: ArrayLike) -> Array:
+    """Cross-product matrices ``[v]x`` of vectors ``(..., 3)`` -> ``(..., 3, 3)``."""
+    v = np.asarray(v, dtype=float)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+def so3_exp(omega: ArrayLike) -> Array:
+    """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` (rad)."""
+    omega = np.asarray(omega, dtype=float)
+    return Rotation.from_rotvec(omega.reshape(-1, 3)).as_matrix().reshape(omega.shape + (3,))
+
+
+def so3_log(R: ArrayLike) -> Array:
+    """Rotation vectors ``(..., 3)`` (rad) of rotation matrices ``(..., 3, 3)``."""
+    R = np.asarray(R, dtype=float)
+    return Rotation.from_matrix(R.reshape(-1, 3, 3)).as_rotvec().reshape(R.shape[:-1])
+
+
+def so3_left_jacobian(omega: ArrayLike) -> Array:
+    """Left Jacobian ``J_l(omega)`` of SO(3), ``(..., 3, 3)``; ``t = J_l v`` in ``Pose3.Expmap``."""
+    omega = np.asarray(omega, dtype=float)
+    theta = np.linalg.norm(omega, axis=-1)[..., None, None]
+    W = skew(omega)
+    small = theta < 1e-5
+    th = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(th)) / th**2)
+    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (th - np.sin(th)) / th**3)
+    return np.eye(3) + a * W + b * (W @ W)
+
+
+def se3_exp(xi: ArrayLike) -> Array:
+    """Poses ``(..., 4, 4)`` from tangent vectors ``(..., 6)`` = ``[omega, v]`` (gtsam Expmap)."""
+    xi = np.asarray(xi, dtype=float)
+    T = np.zeros(xi.shape[:-1] + (4, 4))
+    T[..., :3, :3] = so3_exp(xi[..., :3])
+    T[..., :3, 3] = np.einsum("...ij,...j->...i", so3_left_jacobian(xi[..., :3]), xi[..., 3:])
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def se3_log(T: ArrayLike) -> Array:
+    """Tangent vectors ``(..., 6)`` = ``[omega, v]`` of poses ``(..., 4, 4)`` (gtsam Logmap)."""
+    T = np.asarray(T, dtype=float)
+    omega = so3_log(T[..., :3, :3])
+    v = np.linalg.solve(so3_left_jacobian(omega), T[..., :3, 3, None])[..., 0]
+    return np.concatenate([omega, v], axis=-1)
+
+
+def make_pose(R: ArrayLike, t: ArrayLike) -> Array:
+    """Stack rotation ``(..., 3, 3)`` and translation ``(..., 3)`` into ``(..., 4, 4)``."""
+    R = np.asarray(R, dtype=float)
+    t = np.asarray(t, dtype=float)
+    shape = np.broadcast_shapes(R.shape[:-2], t.shape[:-1])
+    T = np.zeros(shape + (4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = t
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def inverse(T: ArrayLike) -> Array:
+    """Inverse of poses ``(..., 4, 4)``."""
+    T = np.asarray(T, dtype=float)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    return make_pose(Rt, -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3]))
+
+
+def transform_points(T: ArrayLike, p: ArrayLike) -> Array:
+    """Apply poses ``(..., 4, 4)`` to points ``(..., 3)`` (broadcasting)."""
+    T = np.asarray(T, dtype=float)
+    p = np.asarray(p, dtype=float)
+    return np.einsum("...ij,...j->...i", T[..., :3, :3], p) + T[..., :3, 3]
+
+
+def quat_to_matrix(q_wxyz: ArrayLike) -> Array:
+    """Rotation matrices from quaternions ``[w, x, y, z]`` (normalised first)."""
+    q = np.asarray(q_wxyz, dtype=float)
+    flat = q.reshape(-1, 4)
+    R = Rotation.from_quat(flat[:, [1, 2, 3, 0]]).as_matrix()
+    return R.reshape(q.shape[:-1] + (3, 3))
+
+
+def matrix_to_quat(R: ArrayLike) -> Array:
+    """Quaternions ``[w, x, y, z]`` (w >= 0) of rotation matrices ``(..., 3, 3)``."""
+    R = np.asarray(R, dtype=float)
+    xyzw = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat()
+    q = xyzw[:, [3, 0, 1, 2]]
+    q *= np.where(q[:, :1] < 0, -1.0, 1.0)
+    return q.reshape(R.shape[:-2] + (4,))
+
+
+def pose_from_quat(position: ArrayLike, q_wxyz: ArrayLike) -> Array:
+    """Pose ``(..., 4, 4)`` from position ``(..., 3)`` and quaternion ``[w, x, y, z]``."""
+    return make_pose(quat_to_matrix(q_wxyz), position)
+
+
+def euler_zyx(R: ArrayLike) -> Array:
+    """``[roll, pitch, yaw]`` (rad) of ``R = Rz(yaw) Ry(pitch) Rx(roll)``, ``(..., 3)``."""
+    R = np.asarray(R, dtype=float)
+    yaw = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    pitch = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
+    roll = np.arctan2(R[..., 2, 1], R[..., 2, 2])
+    return np.stack([roll, pitch, yaw], axis=-1)
+
+
+def rotation_angle(R: ArrayLike) -> Array:
+    """Rotation angle (rad) of rotation matrices ``(..., 3, 3)``."""
+    R = np.asarray(R, dtype=float)
+    c = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
+    return np.arccos(np.clip(c, -1.0, 1.0))
+
+
+def interpolate_poses(times: ArrayLike, T: ArrayLike, query: ArrayLike) -> Array:
+    """Board poses at ``query`` times: slerp of rotation, linear position, clamped at ends.
+
+    ``times`` (N,) increasing, ``T`` (N, 4, 4), ``query`` (M,) -> (M, 4, 4).
+    """
+    times = np.asarray(times, dtype=float)
+    T = np.asarray(T, dtype=float)
+    q = np.clip(np.asarray(query, dtype=float), times[0], times[-1])
+    if len(times) == 1:
+        return np.repeat(T[:1], len(q), axis=0)
+    i = np.clip(np.searchsorted(times, q, side="right") - 1, 0, len(times) - 2)
+    dt = times[i + 1] - times[i]
+    s = np.where(dt > 0, (q - times[i]) / np.where(dt > 0, dt, 1.0), 0.0)
+    Ra, Rb = T[i, :3, :3], T[i + 1, :3, :3]
+    dR = so3_log(np.swapaxes(Ra, -1, -2) @ Rb)
+    R = Ra @ so3_exp(s[:, None] * dR)
+    p = (1 - s)[:, None] * T[i, :3, 3] + s[:, None] * T[i + 1, :3, 3]
+    return make_pose(R, p)
