@@ -17,6 +17,9 @@ from .board import Board
 from .errors import InputError
 from .fileio import read_csv_columns, write_csv_columns
 
+SWEEP_GAP_S = 4e-3
+"""Hits of one station and axis further apart than this belong to different sweeps."""
+
 COLUMNS: tuple[tuple[str, type], ...] = (
     ("time", float), ("lighthouse", int), ("axis", int), ("sensor", int), ("angle", float),
 )
@@ -44,6 +47,29 @@ class Angles:
     def stations(self) -> list[int]:
         """Sorted station indices present."""
         return sorted(set(self.lighthouse.tolist()))
+
+    def sweep_ids(self, max_gap_s: float = SWEEP_GAP_S) -> NDArray[np.int64]:
+        """Sweep index of every hit, numbered 0.. in time order.
+
+        A sweep is one pass of one station's laser (one 8.333 ms slot). Uses the extra
+        ``sweep`` column when present; otherwise hits of the same station and axis belong to
+        one sweep while they are less than ``max_gap_s`` after the sweep's first hit.
+        """
+        if "sweep" in self.extra:
+            key = np.asarray(self.extra["sweep"], dtype=np.int64) * 64 + self.lighthouse
+            _, ids = np.unique(key, return_inverse=True)
+            return ids.astype(np.int64)
+        ids = np.empty(len(self), dtype=np.int64)
+        open_sweeps: dict[tuple[int, int], tuple[int, float]] = {}
+        count = 0
+        for i, (t, lh, ax) in enumerate(zip(self.time, self.lighthouse, self.axis, strict=True)):
+            current = open_sweeps.get((lh, ax))
+            if current is None or t - current[1] > max_gap_s:
+                current = (count, t)
+                open_sweeps[(lh, ax)] = current
+                count += 1
+            ids[i] = current[0]
+        return ids
 
     def check_board(self, board: Board, source: str | Path | None = None) -> NDArray:
         """Board row index of each hit; unknown sensor ids raise InputError."""
