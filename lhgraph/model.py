@@ -22,8 +22,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .transforms import inverse, skew
-
 Array = NDArray[np.float64]
 
 CALIBRATION_KEYS = ("phase", "tilt", "curve", "gibphase", "gibmag")
@@ -149,14 +147,23 @@ def sweep_angle(
     return angle, J
 
 
+def _relative_pose(T_world_lh: Array, T_world_board: Array) -> tuple[Array, Array]:
+    """Rotation ``(..., 3, 3)`` and translation ``(..., 3)`` of ``T_lh_board``."""
+    R_l = np.swapaxes(T_world_lh[..., :3, :3], -1, -2)
+    R = R_l @ T_world_board[..., :3, :3]
+    t = (R_l @ (T_world_board[..., :3, 3] - T_world_lh[..., :3, 3])[..., None])[..., 0]
+    return R, t
+
+
 def sensor_in_station(T_world_lh: ArrayLike, T_world_board: ArrayLike, s_board: ArrayLike) -> Array:
     """Station-frame position ``(N, 3)`` of board-frame sensor points ``(N, 3)``.
 
     ``T_world_lh`` and ``T_world_board`` are ``(4, 4)`` or ``(N, 4, 4)``.
     """
-    T_lh_board = inverse(T_world_lh) @ np.asarray(T_world_board, dtype=float)
+    R, t = _relative_pose(np.asarray(T_world_lh, dtype=float),
+                          np.asarray(T_world_board, dtype=float))
     s = np.asarray(s_board, dtype=float)
-    return np.einsum("...ij,...j->...i", T_lh_board[..., :3, :3], s) + T_lh_board[..., :3, 3]
+    return (R @ s[..., None])[..., 0] + t
 
 
 def predict(
@@ -173,24 +180,19 @@ def predict(
     With ``jacobians=True`` also returns ``H_lh`` and ``H_board`` ``(N, 6)``: the derivatives
     w.r.t. right perturbations ``[omega, v]`` of ``T_world_lh`` and ``T_world_board``.
     """
-    T_world_lh = np.asarray(T_world_lh, dtype=float)
-    T_world_board = np.asarray(T_world_board, dtype=float)
+    R, t = _relative_pose(np.asarray(T_world_lh, dtype=float),
+                          np.asarray(T_world_board, dtype=float))
     s = np.asarray(s_board, dtype=float)
-    p_lh = sensor_in_station(T_world_lh, T_world_board, s)
+    p_lh = (R @ s[..., None])[..., 0] + t
     if not jacobians:
         return sweep_angle(p_lh, axis, model)
     angle, J_p = sweep_angle(p_lh, axis, model, jacobian=True)
     # p_lh = R_l^T (R_b s + t_b - t_l)
-    # d p_lh / d xi_lh    = [ [p_lh]x , -I ]
-    # d p_lh / d xi_board = R_l^T R_b [ -[s]x , I ]
-    H_lh = np.concatenate(
-        [np.einsum("ni,nij->nj", J_p, skew(p_lh)), -J_p], axis=-1
-    )
-    R_lh_board = np.swapaxes(T_world_lh[..., :3, :3], -1, -2) @ T_world_board[..., :3, :3]
-    J_b = np.einsum("ni,...ij->nj", J_p, R_lh_board) if R_lh_board.ndim == 2 else np.einsum(
-        "ni,nij->nj", J_p, R_lh_board
-    )
-    H_board = np.concatenate([-np.einsum("ni,nij->nj", J_b, skew(s)), J_b], axis=-1)
+    # d p_lh / d xi_lh    = [ [p_lh]x , -I ]       -> J [p]x = J x p
+    # d p_lh / d xi_board = R_lh_board [ -[s]x , I ] -> -J_b [s]x = s x J_b
+    H_lh = np.concatenate([np.cross(J_p, p_lh), -J_p], axis=-1)
+    J_b = (J_p[..., None, :] @ R)[..., 0, :]
+    H_board = np.concatenate([np.cross(s, J_b), J_b], axis=-1)
     return angle, H_lh, H_board
 
 

@@ -1,0 +1,166 @@
+"""Single-station board pose from sensor directions (vectorised over many measurements).
+
+A station is a pinhole camera looking along +x: a point's ideal angles give the normalised
+image coordinates ``(y/x, z/x) = (tan azimuth, tan elevation)``. Each measurement (one
+azimuth and one elevation sweep of one station) gives a board pose ``T_lh_board`` by a
+homography on the board's dominant plane, refined by Gauss-Newton with Huber weights on the
+full station model. Both solutions of the planar mirror ambiguity are refined and the better
+one is kept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .model import IDEAL, StationModel, predict
+from .transforms import make_pose, se3_exp, so3_exp
+
+Array = NDArray[np.float64]
+
+# camera coordinates (X_c, Y_c, Z_c) = (y, z, x) of the station frame
+_P_CAM_LH = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+
+
+@dataclass
+class PnPResult:
+    """Board poses ``T_lh_board`` (M, 4, 4), rms angle residual (rad) and sensors used."""
+
+    T_lh_board: Array
+    rms_rad: Array
+    n_sensors: NDArray[np.int64]
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """Measurements with a finite pose."""
+        return np.isfinite(self.rms_rad)
+
+
+def _board_plane(positions: Array, normals: Array) -> tuple[Array, Array]:
+    """Centroid and basis ``B`` (columns e1, e2, n) of the board's best-fit plane; n faces
+    the same way as the mean sensor normal."""
+    c = positions.mean(axis=0)
+    _, _, Vt = np.linalg.svd(positions - c)
+    B = Vt.T.copy()
+    if B[:, 2] @ normals.mean(axis=0) < 0:
+        B[:, 2] *= -1
+        B[:, 1] *= -1
+    return c, B
+
+
+def _homography_poses(uv: Array, mask: NDArray[np.bool_], plane_xy: Array) -> Array:
+    """Camera-from-plane poses (M, 4, 4) by a DLT homography per measurement."""
+    scale = np.abs(plane_xy).max()
+    X, Y = plane_xy[:, 0] / scale, plane_xy[:, 1] / scale
+    u, v = np.nan_to_num(uv[..., 0]), np.nan_to_num(uv[..., 1])
+    M, S = u.shape
+    X, Y = np.broadcast_to(X, (M, S)), np.broadcast_to(Y, (M, S))
+    one, zero = np.ones((M, S)), np.zeros((M, S))
+    A = np.zeros((M, 2 * S, 9))
+    A[:, 0::2, :] = np.stack([X, Y, one, zero, zero, zero, -u * X, -u * Y, -u], axis=-1)
+    A[:, 1::2, :] = np.stack([zero, zero, zero, X, Y, one, -v * X, -v * Y, -v], axis=-1)
+    A *= np.repeat(mask, 2, axis=1)[..., None]
+    _, _, Vt = np.linalg.svd(A)
+    H = Vt[:, -1, :].reshape(M, 3, 3) * np.array([1 / scale, 1 / scale, 1.0])
+    h1, h2, h3 = H[:, :, 0], H[:, :, 1], H[:, :, 2]
+    lam = 2.0 / (np.linalg.norm(h1, axis=1) + np.linalg.norm(h2, axis=1))
+    lam *= np.where(h3[:, 2] < 0, -1.0, 1.0)
+    r1, r2 = lam[:, None] * h1, lam[:, None] * h2
+    R = np.stack([r1, r2, np.cross(r1, r2)], axis=-1)
+    U, _, Wt = np.linalg.svd(R)
+    R = U @ Wt
+    R[np.linalg.det(R) < 0] *= -1  # degenerate fits only; refined or rejected later
+    t = lam[:, None] * h3
+    return make_pose(R, t)
+
+
+def _refine(
+    T: Array, meas: Array, mask: NDArray[np.bool_], positions: Array, model: StationModel,
+    iterations: int, huber_rad: float,
+) -> tuple[Array, Array]:
+    """Gauss-Newton (Huber-weighted) on the full model; returns poses and rms residual."""
+    M, S = mask.shape
+    s = np.broadcast_to(positions, (M, S, 3)).reshape(-1, 3)
+    m = mask.reshape(-1)
+    I6 = np.eye(6)
+    for _ in range(iterations):
+        Tb = np.repeat(T, S, axis=0)
+        H_all, r_all = [], []
+        for axis in (0, 1):
+            ax = np.full(M * S, axis)
+            pred, _, H = predict(np.eye(4), Tb, s, ax, model, jacobians=True)
+            r_all.append(np.where(m, pred - meas[..., axis].reshape(-1), 0.0))
+            H_all.append(np.where(m[:, None], H, 0.0))
+        r = np.stack(r_all, axis=1).reshape(M, 2 * S)
+        H = np.stack(H_all, axis=1).reshape(M, 2 * S, 6)
+        w = np.minimum(1.0, huber_rad / np.maximum(np.abs(r), 1e-15))
+        Hw = H * w[..., None]
+        JtJ = np.swapaxes(Hw, 1, 2) @ H + 1e-12 * I6
+        Jtr = (np.swapaxes(Hw, 1, 2) @ r[..., None])[..., 0]
+        delta = -np.linalg.solve(JtJ, Jtr[..., None])[..., 0]
+        T = T @ se3_exp(delta)
+        if np.max(np.abs(delta)) < 1e-9:
+            break
+    n = np.maximum(2 * mask.sum(axis=1), 1)
+    rms = np.sqrt(np.sum(r**2, axis=1) / n)
+    return T, rms
+
+
+def board_poses(
+    azimuth: Array,
+    elevation: Array,
+    positions: Array,
+    normals: Array,
+    model: StationModel = IDEAL,
+    iterations: int = 15,
+    min_sensors: int = 5,
+    huber_rad: float = 1e-3,
+) -> PnPResult:
+    """Board poses ``T_lh_board`` from measured angles ``(M, S)`` (rad, NaN = not seen).
+
+    ``positions``/``normals`` (S, 3) are the board sensors (board frame). Measurements with
+    fewer than ``min_sensors`` sensors seen on both axes get NaN poses and rms.
+    """
+    azimuth = np.asarray(azimuth, dtype=float)
+    elevation = np.asarray(elevation, dtype=float)
+    mask = np.isfinite(azimuth) & np.isfinite(elevation)
+    n = mask.sum(axis=1)
+    ok = n >= min_sensors
+    M = len(azimuth)
+    T_out = np.full((M, 4, 4), np.nan)
+    rms_out = np.full(M, np.nan)
+    if not np.any(ok):
+        return PnPResult(T_out, rms_out, n)
+    az, el, mk = azimuth[ok], elevation[ok], mask[ok]
+    meas = np.stack([np.nan_to_num(az), np.nan_to_num(el)], axis=-1)
+    c, B = _board_plane(positions, normals)
+    plane_xy = (positions - c) @ B[:, :2]
+    uv = np.stack([np.tan(az), np.tan(el)], axis=-1)
+    T_cam_plane = _homography_poses(uv, mk, plane_xy)
+    # T_lh_board = P^T T_cam_plane [B^T, -B^T c]
+    T_plane_board = make_pose(B.T, -B.T @ c)
+    T_lh_cam = make_pose(_P_CAM_LH.T, np.zeros(3))
+    T0 = T_lh_cam @ T_cam_plane @ T_plane_board
+    # mirror candidate: reflect the board normal about the line of sight, rotate to match
+    n_lh = T0[:, :3, :3] @ B[:, 2]
+    d = T0[:, :3, 3] / np.linalg.norm(T0[:, :3, 3], axis=1, keepdims=True)
+    n_alt = 2 * np.sum(n_lh * d, axis=1, keepdims=True) * d - n_lh
+    axis = np.cross(n_lh, n_alt)
+    angle = np.arctan2(np.linalg.norm(axis, axis=1), np.sum(n_lh * n_alt, axis=1))
+    axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+    R_rot = so3_exp(axis * angle[:, None])
+    c_lh = T0[:, :3, :3] @ c + T0[:, :3, 3]
+    T1 = T0.copy()
+    T1[:, :3, :3] = R_rot @ T0[:, :3, :3]
+    T1[:, :3, 3] = c_lh - T1[:, :3, :3] @ c
+    Ta, rms_a = _refine(T0, meas, mk, positions, model, iterations, huber_rad)
+    Tb, rms_b = _refine(T1, meas, mk, positions, model, iterations, huber_rad)
+    better_b = (rms_b < rms_a) | ~np.isfinite(rms_a)
+    T = np.where(better_b[:, None, None], Tb, Ta)
+    rms = np.where(better_b, rms_b, rms_a)
+    in_front = T[:, 0, 3] > 0
+    T_out[ok] = np.where(in_front[:, None, None], T, np.nan)
+    rms_out[ok] = np.where(in_front, rms, np.nan)
+    return PnPResult(T_out, rms_out, n)
