@@ -1,0 +1,77 @@
+/* Capture state machine: IDLE -> (ARM) -> ARMED -> (start delay over) -> CAPTURING ->
+ * (all samples taken, or storage full) -> finalising -> READY. ABORT returns to IDLE from any
+ * state; ARM is also accepted in READY (the old capture is dropped).
+ *
+ * Threading on the target: lhb_capture_feed() runs in the DMA interrupt, everything else in
+ * the main loop. The fields the interrupt writes are 32-bit and read atomically. */
+#ifndef LHB_CAPTURE_H
+#define LHB_CAPTURE_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "lhb/lhcap.h"
+
+typedef enum {
+    LHB_STATE_IDLE = 0,
+    LHB_STATE_ARMED = 1,
+    LHB_STATE_CAPTURING = 2,
+    LHB_STATE_READY = 3,
+} lhb_state_t;
+
+/* Hardware hooks. start: begin sampling (samples then arrive through lhb_capture_feed);
+ * returns 0 on success. stop: stop sampling (idempotent, also called after an abort). */
+typedef struct {
+    int (*start)(void *ctx, uint32_t n_samples);
+    void (*stop)(void *ctx);
+    void *ctx;
+} lhb_hw_t;
+
+typedef struct {
+    lhb_hw_t hw;
+    lhcap_header_t tmpl;      /* sample rate, board id, fw version, channel map, extra flags */
+    uint32_t fixed_samples;   /* != 0: capture exactly this many samples (virtual board) */
+    bool fixed_start_time;    /* true: keep tmpl.start_time_us (virtual board) */
+
+    volatile uint32_t state;  /* lhb_state_t */
+    uint32_t duration_ms;
+    uint32_t delay_ms;
+    uint32_t arm_ms;          /* millisecond tick when ARM arrived */
+    uint64_t host_time_us;    /* host clock at ARM (0 = unknown) */
+    uint32_t target;          /* samples to capture */
+    volatile uint32_t samples_done;
+    volatile uint32_t done;   /* set by feed when the capture is complete */
+    uint32_t hw_error;        /* hw.start failed: back to IDLE with this set */
+    lhb_edges_t edges;
+
+    /* finalising: header, then CRC over the records in steps */
+    uint8_t header[LHCAP_HEADER_LEN];
+    uint32_t crc;
+    uint32_t crc_next;        /* next record to add to the CRC */
+    bool finalising;
+    uint32_t image_size;      /* valid in READY */
+    uint32_t image_crc;       /* valid in READY: the trailer value */
+    uint32_t flags;           /* lhcap flags of the current capture */
+} lhb_capture_t;
+
+/* Records to CRC per lhb_capture_poll() call while finalising. */
+#define LHB_FINALISE_STEP 8192u
+
+void lhb_capture_init(lhb_capture_t *c, const lhb_hw_t *hw, uint32_t *storage,
+                      uint32_t storage_records, const lhcap_header_t *tmpl);
+/* Returns LHB_OK, -LHB_E_ARG (duration/delay out of range) or -LHB_E_STATE (busy). */
+int lhb_capture_arm(lhb_capture_t *c, uint32_t duration_ms, uint32_t delay_ms,
+                    uint64_t host_time_us, uint32_t now_ms);
+void lhb_capture_abort(lhb_capture_t *c);
+/* Feeds consecutive port words; returns true once no more samples are wanted. */
+bool lhb_capture_feed(lhb_capture_t *c, const uint32_t *samples, size_t n);
+/* Main-loop step: starts the capture when the delay is over, finalises when done. */
+void lhb_capture_poll(lhb_capture_t *c, uint32_t now_ms);
+/* ms left before sampling starts (ARMED), else 0. */
+uint32_t lhb_capture_delay_left(const lhb_capture_t *c, uint32_t now_ms);
+/* Copies image bytes [offset, offset+len) (header, records, CRC trailer) in READY.
+ * Returns LHB_OK, -LHB_E_STATE or -LHB_E_RANGE. */
+int lhb_capture_read(const lhb_capture_t *c, uint32_t offset, uint8_t *dst, uint32_t len);
+
+#endif

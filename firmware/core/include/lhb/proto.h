@@ -1,0 +1,46 @@
+/* Board side of the link protocol (docs/protocol.md): decodes request frames, runs them
+ * against the capture state machine and emits response frames through a callback. */
+#ifndef LHB_PROTO_H
+#define LHB_PROTO_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "lhb/capture.h"
+#include "lhb/cobs.h"
+#include "lhb/config.h"
+
+typedef void (*lhb_tx_fn)(void *ctx, const uint8_t *data, size_t n);
+
+/* Payload sizes of the fixed-size messages. */
+#define LHB_INFO_LEN 28u
+#define LHB_STATUS_LEN 40u
+#define LHB_ARM_LEN 16u
+#define LHB_READ_REQ_LEN 4u
+#define LHB_ERROR_LEN 4u
+
+typedef struct {
+    lhb_capture_t *cap;
+    uint32_t block_size;
+    uint32_t max_records;
+    lhb_tx_fn tx;
+    void *tx_ctx;
+    lhb_cobs_dec_t dec;
+    uint8_t rx_raw[LHB_REQ_RAW_MAX];
+    uint8_t payload[LHB_RESP_PAYLOAD_MAX];
+    uint8_t wire[LHB_WIRE_MAX(LHB_RESP_RAW_MAX)];
+    /* counters (diagnostics, and the virtual board's fault injection) */
+    uint32_t frames_ok;
+    uint32_t frames_bad;
+    uint32_t blocks_sent;
+} lhb_proto_t;
+
+/* block_size: 1..LHB_BLOCK_SIZE_MAX (clamped). */
+void lhb_proto_init(lhb_proto_t *p, lhb_capture_t *cap, uint32_t block_size, lhb_tx_fn tx,
+                    void *tx_ctx);
+/* Feeds received bytes; complete frames are handled at once (responses sent via tx). */
+void lhb_proto_rx(lhb_proto_t *p, const uint8_t *data, size_t n, uint32_t now_ms);
+/* Handles one decoded frame (exposed for tests and the fuzzer). */
+void lhb_proto_handle(lhb_proto_t *p, const uint8_t *raw, size_t n, uint32_t now_ms);
+
+#endif

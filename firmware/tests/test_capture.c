@@ -1,0 +1,153 @@
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "lhb/crc32.h"
+#include "lhb/endian.h"
+#include "lhb/errors.h"
+#include "support.h"
+
+#define NS 4000u /* 2 ms at 2 MHz */
+
+static uint32_t samples[NS];
+static uint32_t storage[2 * 1000];
+static uint8_t want[108 + 8 * NS + 4];
+static uint8_t got[108 + 8 * NS + 4];
+
+static void run_poll_until_ready(lhb_capture_t *c, uint32_t now)
+{
+    for (int i = 0; i < 100 && c->state != LHB_STATE_READY; i++) {
+        lhb_capture_poll(c, now);
+    }
+}
+
+int main(void)
+{
+    uint32_t rng = 3;
+    uint32_t w = 0;
+    for (size_t i = 0; i < NS; i++) {
+        if (test_rand(&rng) % 20 == 0) {
+            w ^= 1u << (test_rand(&rng) % 32);
+        }
+        samples[i] = w;
+    }
+    fake_hw_t fake;
+    lhb_hw_t hw = fake_hw_hooks(&fake);
+    lhcap_header_t t;
+    default_template(&t);
+    lhb_capture_t c;
+    lhb_capture_init(&c, &hw, storage, 1000, &t);
+    CHECK_EQ(c.state, LHB_STATE_IDLE);
+
+    /* argument checks */
+    CHECK_EQ(lhb_capture_arm(&c, 0, 0, 0, 0), -LHB_E_ARG);
+    CHECK_EQ(lhb_capture_arm(&c, 60001, 0, 0, 0), -LHB_E_ARG);
+    CHECK_EQ(lhb_capture_arm(&c, 2, 60001, 0, 0), -LHB_E_ARG);
+    CHECK_EQ(c.state, LHB_STATE_IDLE);
+    /* read before ready */
+    uint8_t tmp[8];
+    CHECK_EQ(lhb_capture_read(&c, 0, tmp, 8), -LHB_E_STATE);
+
+    /* arm with a 10 ms delay; host time 1e15 us */
+    CHECK_EQ(lhb_capture_arm(&c, 2, 10, 1000000000000000ull, 1000), LHB_OK);
+    CHECK_EQ(c.state, LHB_STATE_ARMED);
+    CHECK_EQ(c.target, NS);
+    CHECK_EQ(lhb_capture_arm(&c, 2, 0, 0, 1000), -LHB_E_STATE); /* busy */
+    lhb_capture_poll(&c, 1005);
+    CHECK_EQ(c.state, LHB_STATE_ARMED);
+    CHECK_EQ(lhb_capture_delay_left(&c, 1005), 5);
+    CHECK_EQ(fake.starts, 0);
+    /* feed before capturing is ignored */
+    CHECK(lhb_capture_feed(&c, samples, 10));
+    CHECK_EQ(c.samples_done, 0);
+    lhb_capture_poll(&c, 1010);
+    CHECK_EQ(c.state, LHB_STATE_CAPTURING);
+    CHECK_EQ(fake.starts, 1);
+    CHECK_EQ(fake.requested, NS);
+    CHECK_EQ(lhb_capture_arm(&c, 2, 0, 0, 1000), -LHB_E_STATE); /* busy */
+    /* feed in chunks, more than wanted */
+    CHECK(!lhb_capture_feed(&c, samples, 1000));
+    CHECK(!lhb_capture_feed(&c, samples + 1000, 2000));
+    lhb_capture_poll(&c, 1011);
+    CHECK_EQ(c.state, LHB_STATE_CAPTURING); /* not done yet */
+    CHECK(lhb_capture_feed(&c, samples + 3000, 5000)); /* more than needed */
+    CHECK_EQ(c.samples_done, NS);
+    run_poll_until_ready(&c, 1012);
+    CHECK_EQ(c.state, LHB_STATE_READY);
+    CHECK(fake.stops >= 1);
+
+    t.start_time_us = 1000000000000000ull + 10000u; /* host time + delay */
+    size_t n = reference_image(&t, samples, NS, want);
+    CHECK_EQ(c.image_size, n);
+    CHECK_EQ(c.image_crc, lhb_get_le32(want + n - 4));
+    CHECK_EQ(lhb_capture_read(&c, 0, got, (uint32_t)n), LHB_OK);
+    CHECK(memcmp(got, want, n) == 0);
+    CHECK_EQ(lhb_crc32(got, n - 4), lhb_get_le32(got + n - 4));
+    /* reads at odd offsets and lengths */
+    int ok = 1;
+    for (uint32_t off = 0; off < n; off += 1 + off / 3) {
+        uint32_t len = (uint32_t)(n - off < 13 ? n - off : 13);
+        memset(tmp, 0, sizeof tmp);
+        uint8_t part[13];
+        if (lhb_capture_read(&c, off, part, len) != LHB_OK || memcmp(part, want + off, len) != 0) {
+            ok = 0;
+        }
+    }
+    CHECK(ok);
+    CHECK_EQ(lhb_capture_read(&c, (uint32_t)n, got, 0), LHB_OK);
+    CHECK_EQ(lhb_capture_read(&c, (uint32_t)n, got, 1), -LHB_E_RANGE);
+    CHECK_EQ(lhb_capture_read(&c, 0, got, (uint32_t)n + 1), -LHB_E_RANGE);
+    CHECK_EQ(lhb_capture_read(&c, 0xFFFFFFFFu, got, 2), -LHB_E_RANGE);
+    CHECK_EQ(lhb_capture_read(&c, 0, NULL, 2), -LHB_E_RANGE);
+
+    /* re-arm from READY is allowed, abort goes back to IDLE */
+    CHECK_EQ(lhb_capture_arm(&c, 1, 0, 0, 2000), LHB_OK);
+    lhb_capture_poll(&c, 2000);
+    CHECK_EQ(c.state, LHB_STATE_CAPTURING);
+    lhb_capture_abort(&c);
+    CHECK_EQ(c.state, LHB_STATE_IDLE);
+    CHECK(lhb_capture_feed(&c, samples, 10)); /* late feed ignored */
+    CHECK_EQ(lhb_capture_read(&c, 0, tmp, 1), -LHB_E_STATE);
+
+    /* overflow: storage of 5 records stops early and sets the flag */
+    lhb_capture_init(&c, &hw, storage, 5, &t);
+    CHECK_EQ(lhb_capture_arm(&c, 2, 0, 0, 0), LHB_OK);
+    lhb_capture_poll(&c, 0);
+    CHECK(lhb_capture_feed(&c, samples, NS));
+    run_poll_until_ready(&c, 1);
+    CHECK_EQ(c.state, LHB_STATE_READY);
+    CHECK_EQ(c.edges.n, 5);
+    CHECK(c.samples_done < NS);
+    CHECK_EQ(c.flags & LHCAP_FLAG_OVERFLOW, 1);
+    CHECK_EQ(lhb_capture_read(&c, 0, got, c.image_size), LHB_OK);
+    CHECK_EQ(lhb_get_le32(got + 12), 1);
+    CHECK_EQ(lhb_get_le64(got + 32), c.samples_done);
+    CHECK_EQ(lhb_crc32(got, c.image_size - 4), lhb_get_le32(got + c.image_size - 4));
+    /* start time unknown when the host sent 0 */
+    CHECK_EQ(lhb_get_le64(got + 24), 0);
+
+    /* hardware start failure: back to IDLE with hw_error */
+    lhb_capture_init(&c, &hw, storage, 1000, &t);
+    fake.fail_start = 1;
+    CHECK_EQ(lhb_capture_arm(&c, 2, 0, 0, 0), LHB_OK);
+    lhb_capture_poll(&c, 0);
+    CHECK_EQ(c.state, LHB_STATE_IDLE);
+    CHECK_EQ(c.hw_error, 1);
+    fake.fail_start = 0;
+
+    /* fixed sample count and start time (virtual board) */
+    lhb_capture_init(&c, &hw, storage, 1000, &t);
+    c.fixed_samples = 100;
+    c.fixed_start_time = true;
+    CHECK_EQ(lhb_capture_arm(&c, 5000, 0, 42, 0), LHB_OK);
+    CHECK_EQ(c.target, 100);
+    lhb_capture_poll(&c, 0);
+    CHECK(lhb_capture_feed(&c, samples, 100));
+    run_poll_until_ready(&c, 0);
+    CHECK_EQ(c.state, LHB_STATE_READY);
+    n = reference_image(&t, samples, 100, want);
+    CHECK_EQ(c.image_size, n);
+    CHECK_EQ(lhb_capture_read(&c, 0, got, (uint32_t)n), LHB_OK);
+    CHECK(memcmp(got, want, n) == 0);
+    return check_result("capture");
+}
