@@ -41,10 +41,9 @@ def ad_matrix(xi: Array) -> Array:
 
 
 def right_jacobian(xi: Array) -> Array:
-    """SE(3) right Jacobian of Exp, series to third order (|xi| << 1 here)."""
+    """SE(3) right Jacobian of Exp, series to second order (here |xi| < 1e-2: error < 1e-7)."""
     A = ad_matrix(xi)
-    A2 = A @ A
-    return np.eye(6) - A / 2 + A2 / 6 - A2 @ A / 24
+    return np.eye(6) - A / 2 + A @ A / 6
 
 
 def right_jacobian_inverse(xi: Array) -> Array:
