@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# Firmware CI: host build + unit tests + fuzz-corpus replay, then the STM32F429 cross build.
+#   bash firmware/ci.sh        (from the repository root or anywhere)
+# Installs what it needs with apt-get when missing (needs root, as on the project's CI).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT="$(pwd)"
+
+need=()
+command -v cmake > /dev/null || need+=(cmake)
+command -v make > /dev/null || need+=(make)
+command -v cc > /dev/null || need+=(gcc libc6-dev)
+command -v python3 > /dev/null || need+=(python3)
+command -v arm-none-eabi-gcc > /dev/null || need+=(gcc-arm-none-eabi)
+[ -d /usr/lib/arm-none-eabi/newlib ] || need+=(libnewlib-arm-none-eabi)
+if [ "${#need[@]}" -gt 0 ]; then
+    echo "firmware/ci.sh: installing ${need[*]}"
+    export DEBIAN_FRONTEND=noninteractive
+    apt-get update -qq
+    apt-get install -y -qq --no-install-recommends "${need[@]}" > /dev/null
+fi
+
+echo "== host build (build/firmware-host)"
+cmake -S firmware -B build/firmware-host -DCMAKE_BUILD_TYPE=RelWithDebInfo > /dev/null
+cmake --build build/firmware-host -j2 > /dev/null
+echo "== host tests"
+ctest --test-dir build/firmware-host --output-on-failure
+
+echo "== cross build (build/firmware-arm)"
+cmake -S firmware -B build/firmware-arm \
+    -DCMAKE_TOOLCHAIN_FILE="$ROOT/firmware/cmake/arm-none-eabi.cmake" \
+    -DCMAKE_BUILD_TYPE=MinSizeRel > /dev/null
+cmake --build build/firmware-arm -j2 > /dev/null
+echo "== image size"
+arm-none-eabi-size -A build/firmware-arm/target/stm32f429/lhgraph-board.elf \
+    | grep -E '^(section|\.isr_vector|\.text|\.data|\.bss|\.ccm|\.sdram) '
+arm-none-eabi-size build/firmware-arm/target/stm32f429/lhgraph-board.elf
+
+# a few seconds of fuzzing when clang is there (never updates the kept corpus)
+if command -v clang > /dev/null && [ "${LHB_CI_FUZZ_SECONDS:-5}" -gt 0 ]; then
+    echo "== fuzz smoke (${LHB_CI_FUZZ_SECONDS:-5} s)"
+    bash firmware/fuzz/run_fuzz.sh "${LHB_CI_FUZZ_SECONDS:-5}" > build/fuzz-smoke.log 2>&1 \
+        || { tail -40 build/fuzz-smoke.log; exit 1; }
+    grep -E 'stat::number_of_executed_units' build/fuzz-smoke.log || true
+fi
+echo "firmware/ci.sh: OK"

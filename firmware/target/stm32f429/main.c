@@ -1,0 +1,50 @@
+/* Board main loop: link bytes -> protocol core; capture state machine steps. */
+#include <stdint.h>
+
+#include "board.h"
+#include "hw.h"
+#include "lhb/config.h"
+#include "lhb/crc32.h"
+#include "lhb/proto.h"
+#include "regs.h"
+
+#define MAX_RECORDS (BOARD_SDRAM_SIZE / 8u)
+
+/* edge records: the whole SDRAM, 2 words per record */
+static uint32_t record_store[2u * MAX_RECORDS] __attribute__((section(".sdram")));
+static lhb_capture_t capture;
+static lhb_proto_t proto;
+
+static uint32_t board_id(void)
+{
+    uint32_t uid[3] = {UID_BASE[0], UID_BASE[1], UID_BASE[2]};
+    return lhb_crc32(uid, sizeof uid); /* 96-bit unique device ID folded to 32 bits */
+}
+
+int main(void)
+{
+    clock_init();
+    systick_init();
+    bool sdram_ok = sdram_init();
+    uart_init();
+    sampler_init(&capture);
+
+    lhcap_header_t t = {0};
+    t.sample_rate = LHB_SAMPLE_RATE_HZ;
+    t.board_id = board_id();
+    t.fw_version = LHB_FW_VERSION;
+    for (int k = 0; k < 32; k++) {
+        t.channel_map[k] = (int16_t)k;
+    }
+    lhb_hw_t hw = {sampler_start, sampler_stop, NULL};
+    lhb_capture_init(&capture, &hw, sdram_ok ? record_store : 0, sdram_ok ? MAX_RECORDS : 0u, &t);
+    lhb_proto_init(&proto, &capture, LHB_BLOCK_SIZE_DEFAULT, uart_tx, NULL);
+
+    for (;;) {
+        uint8_t b;
+        while (uart_rx_pop(&b)) {
+            lhb_proto_rx(&proto, &b, 1, millis());
+        }
+        lhb_capture_poll(&capture, millis());
+    }
+}

@@ -1,0 +1,55 @@
+/* Reset handler and vector table for the STM32F429 (16 system + 91 device vectors). */
+#include <stdint.h>
+
+#include "regs.h"
+
+extern uint32_t _sidata, _sdata, _edata, _sbss, _ebss, _estack;
+int main(void);
+
+void Reset_Handler(void);
+void Default_Handler(void);
+void SysTick_Handler(void);
+void USART1_IRQHandler(void);
+void DMA2_Stream2_IRQHandler(void);
+
+void Default_Handler(void)
+{
+    for (;;) {
+        /* unexpected interrupt or fault: stay here for the debugger (the watchdog is off) */
+    }
+}
+
+void Reset_Handler(void)
+{
+    /* FPU on first (CP10, CP11 full access): compiled code may use FP registers */
+    SCB_CPACR |= 0xFu << 20;
+    dsb();
+    isb();
+    uint32_t *src = &_sidata;
+    for (uint32_t *dst = &_sdata; dst < &_edata;) {
+        *dst++ = *src++;
+    }
+    for (uint32_t *dst = &_sbss; dst < &_ebss;) {
+        *dst++ = 0;
+    }
+    (void)main();
+    for (;;) {
+    }
+}
+
+typedef void (*vector_t)(void);
+
+#define N_VECTORS (16 + 91)
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Woverride-init"
+__attribute__((section(".isr_vector"), used)) const vector_t vector_table[N_VECTORS] = {
+    [0] = (vector_t)(uintptr_t)&_estack,
+    [1] = Reset_Handler,
+    [2 ... N_VECTORS - 1] = Default_Handler,
+    [7] = 0, [8] = 0, [9] = 0, [10] = 0, [13] = 0, /* reserved */
+    [15] = SysTick_Handler,
+    [16 + IRQ_USART1] = USART1_IRQHandler,
+    [16 + IRQ_DMA2_STREAM2] = DMA2_Stream2_IRQHandler,
+};
+#pragma GCC diagnostic pop

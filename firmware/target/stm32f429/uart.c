@@ -1,0 +1,75 @@
+/* USART1 at 6 Mbaud with RTS/CTS: interrupt-driven receive into a ring buffer, blocking send.
+ * 6 Mbaud is exact: 90 MHz / (8 * 1.875), BRR = 1 << 4 | 7 with OVER8. */
+#include "board.h"
+#include "hw.h"
+#include "regs.h"
+
+#define RX_SIZE 1024u /* power of two */
+
+static volatile uint8_t rx_buf[RX_SIZE];
+static volatile uint32_t rx_head; /* written by the interrupt */
+static volatile uint32_t rx_tail; /* written by the main loop */
+
+static void pin_af7(uint32_t n)
+{
+    gpio_t *g = GPIO(PORT_A);
+    g->MODER = (g->MODER & ~(3u << (2u * n))) | (2u << (2u * n));
+    g->OSPEEDR |= 3u << (2u * n);
+    g->PUPDR = (g->PUPDR & ~(3u << (2u * n))) | (1u << (2u * n)); /* pull-up: idle high */
+    g->AFR[n >> 3] = (g->AFR[n >> 3] & ~(0xFu << (4u * (n & 7u)))) | (7u << (4u * (n & 7u)));
+}
+
+void uart_init(void)
+{
+    RCC->AHB1ENR |= RCC_AHB1ENR_GPIO(PORT_A);
+    RCC->APB2ENR |= RCC_APB2ENR_USART1EN;
+    (void)RCC->APB2ENR;
+    pin_af7(9);  /* TX */
+    pin_af7(10); /* RX */
+    pin_af7(11); /* CTS */
+    pin_af7(12); /* RTS */
+    USART1->CR1 = 0;
+    /* OVER8: USARTDIV = 90e6 / (8 * 6e6) = 1.875 -> mantissa 1, fraction 0.875 * 8 = 7 */
+    _Static_assert(BOARD_PCLK2_HZ == 90000000u && BOARD_UART_BAUD == 6000000u,
+                   "BRR below is for 90 MHz / 6 Mbaud");
+    USART1->BRR = (1u << 4) | 7u;
+    USART1->CR2 = 0;
+    USART1->CR3 = USART_CR3_RTSE | USART_CR3_CTSE;
+    USART1->CR1 = USART_CR1_OVER8 | USART_CR1_TE | USART_CR1_RE | USART_CR1_RXNEIE | USART_CR1_UE;
+    nvic_enable(IRQ_USART1, 0u); /* above the DMA interrupt: never lose a received byte */
+}
+
+void USART1_IRQHandler(void);
+void USART1_IRQHandler(void)
+{
+    uint32_t sr = USART1->SR;
+    if ((sr & (USART_SR_RXNE | USART_SR_ORE)) != 0u) {
+        uint8_t b = (uint8_t)USART1->DR; /* reading SR then DR also clears ORE */
+        uint32_t next = (rx_head + 1u) & (RX_SIZE - 1u);
+        if (next != rx_tail) { /* full: drop (the frame CRC catches it, the host retries) */
+            rx_buf[rx_head] = b;
+            rx_head = next;
+        }
+    }
+}
+
+bool uart_rx_pop(uint8_t *b)
+{
+    uint32_t t = rx_tail;
+    if (t == rx_head) {
+        return false;
+    }
+    *b = rx_buf[t];
+    rx_tail = (t + 1u) & (RX_SIZE - 1u);
+    return true;
+}
+
+void uart_tx(void *ctx, const uint8_t *data, size_t n)
+{
+    (void)ctx;
+    for (size_t i = 0; i < n; i++) {
+        while ((USART1->SR & USART_SR_TXE) == 0u) {
+        }
+        USART1->DR = data[i];
+    }
+}
