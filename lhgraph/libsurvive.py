@@ -1,0 +1,149 @@
+"""Reader of libsurvive recordings (``.rec`` / ``.rec.gz``) and their ``.json`` config.
+
+A recording is text, one event per line: ``<host time s> <device> <type> ...``. Used here:
+
+- ``C sensor timecode length`` — a raw light pulse as the device reported it (48 MHz
+  ticks of the device clock, 32-bit wrapping timecode of the rising edge; ``length`` ticks);
+- ``A sensor acode timecode length_s angle lh`` — libsurvive's own decoded sweep angle
+  (rad, ``(t_centre - t_sync - 200000) * 2 pi / 800000`` with ``t_centre`` = timecode +
+  length // 2; ``acode & 1`` is the axis).
+
+Timecodes are unwrapped to int64 ticks counted from the device's first ``C`` line.
+The ``.json`` beside a recording holds libsurvive's factory calibration per lighthouse
+(``fcalphase, fcaltilt, fcalcurve, fcalgibpha, fcalgibmag`` as [axis0, axis1], ``id`` as a
+signed 32-bit integer).
+"""
+
+from __future__ import annotations
+
+import gzip
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .calibration import StationCalibration
+from .errors import InputError
+from .model import FactoryCalibration
+from .signal import LightPulses
+
+TICK_HZ = 48_000_000
+_CAL_KEYS = {"phase": "fcalphase", "tilt": "fcaltilt", "curve": "fcalcurve",
+             "gibphase": "fcalgibpha", "gibmag": "fcalgibmag"}
+
+
+@dataclass
+class LibsurviveAngles:
+    """libsurvive's decoded angles of one device (``A`` lines); times in unwrapped ticks."""
+
+    sensor: NDArray[np.int64]
+    acode: NDArray[np.int64]
+    timecode: NDArray[np.int64]
+    length_s: NDArray[np.float64]
+    angle: NDArray[np.float64]
+    lighthouse: NDArray[np.int64]
+
+
+@dataclass
+class LibsurviveRecording:
+    """Raw light pulses (``C`` lines, ticks) and libsurvive's angles of one device."""
+
+    device: str
+    pulses: LightPulses
+    angles: LibsurviveAngles
+    first_timecode: int
+    sample_rate_hz: int = TICK_HZ
+
+
+def _open_text(path: Path):
+    if path.suffix == ".gz":
+        return gzip.open(path, "rt", errors="replace")
+    return path.open("r", errors="replace")
+
+
+def read_libsurvive(path: str | Path, device: str) -> LibsurviveRecording:
+    """Read one device's light pulses and angles from a libsurvive recording."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("file not found" if not path.exists() else "not a file", path)
+    c_rows: list[list[str]] = []
+    a_rows: list[list[str]] = []
+    devices: set[str] = set()
+    try:
+        with _open_text(path) as f:
+            for line in f:
+                parts = line.split()
+                if len(parts) < 3:
+                    continue
+                if parts[2] == "C":
+                    devices.add(parts[1])
+                    if parts[1] == device:
+                        c_rows.append(parts[3:6])
+                elif parts[2] == "A" and parts[1] == device:
+                    a_rows.append(parts[3:9])
+    except (OSError, EOFError, gzip.BadGzipFile) as exc:
+        if not c_rows:
+            raise InputError(f"unreadable recording ({exc})", path) from None
+        # a truncated gzip keeps the lines read so far
+    if not c_rows:
+        found = ", ".join(sorted(devices)) or "none"
+        raise InputError(f"no raw light ('C') lines for device {device!r} (devices with light: "
+                         f"{found})", path)
+    try:
+        c = np.array(c_rows, dtype=np.int64)
+        a = np.array(a_rows, dtype=float).reshape(-1, 6)
+    except ValueError:
+        raise InputError("malformed C or A line", path) from None
+    raw = c[:, 1]
+    first = int(raw[0])
+    ticks = _unwrap32(np.r_[raw, a[:, 2].astype(np.int64)]) - first
+    start, a_ticks = ticks[: len(raw)], ticks[len(raw):]
+    pulses = LightPulses(c[:, 0], start, start + c[:, 2], np.full(len(c), -1, np.int64))
+    angles = LibsurviveAngles(a[:, 0].astype(np.int64), a[:, 1].astype(np.int64),
+                              _unwrap_near(a_ticks, start), a[:, 3], a[:, 4],
+                              a[:, 5].astype(np.int64))
+    return LibsurviveRecording(device, pulses, angles, first)
+
+
+def _unwrap32(raw: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Unwrap 32-bit timecodes listed in (roughly) time order."""
+    step = np.diff(raw) % (1 << 32)
+    step = np.where(step >= (1 << 31), step - (1 << 32), step)
+    return raw[0] + np.r_[0, np.cumsum(step)]
+
+
+def _unwrap_near(values: NDArray[np.int64], reference: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Shift each value by a multiple of 2^32 to lie nearest to the reference timeline."""
+    if len(values) == 0:
+        return values
+    lo, hi = reference.min(), reference.max()
+    wrapped = (values - lo) % (1 << 32) + lo
+    return np.where(wrapped > hi + (1 << 31), wrapped - (1 << 32), wrapped)
+
+
+def read_libsurvive_calibration(path: str | Path) -> dict[int, StationCalibration]:
+    """Factory calibration per libsurvive lighthouse index from a recording's ``.json``."""
+    path = Path(path)
+    try:
+        text = path.read_text(errors="replace")
+    except FileNotFoundError:
+        raise InputError("file not found", path) from None
+    out: dict[int, StationCalibration] = {}
+    for m in re.finditer(r'"lighthouse(\d+)"\s*:\s*\{(.*?)\}', text, re.S):
+        body = m.group(2)
+
+        def field(key: str, body: str = body, index: str = m.group(1)) -> list[float]:
+            found = re.search(rf'"{key}"\s*:\s*\[([^\]]*)\]', body)
+            if not found:
+                raise InputError(f"lighthouse{index}: missing '{key}'", path)
+            return [float(v.strip().strip('"')) for v in found.group(1).split(",")]
+
+        id_match = re.search(r'"id"\s*:\s*"?(-?\d+)', body)
+        station_id = int(id_match.group(1)) & 0xFFFFFFFF if id_match else 0
+        cal = FactoryCalibration(**{k: field(v) for k, v in _CAL_KEYS.items()})
+        out[int(m.group(1))] = StationCalibration(cal, station_id)
+    if not out:
+        raise InputError('no "lighthouseN" entries', path)
+    return out
