@@ -46,7 +46,7 @@ SYNC_SPACING_S = 20000 / STATION_CLOCK_HZ  # between consecutive stations' sync 
 CLOCK_PPM_RANGE = 30.0  # random station-vs-board clock offset: uniform in +-30 ppm
 BEAM_WIDTH_M = 6e-3  # laser line width at the rotor...
 BEAM_DIVERGENCE_RAD = 1.8e-3  # ...growing with distance: ~10 us pulses at 3 m
-TRAJECTORY_STEP_S = 1e-3
+TRAJECTORY_RATE_HZ = 1000.0  # truth trajectory samples
 DEFAULT_CONFIG = "default_simulation.toml"
 
 
@@ -520,7 +520,7 @@ def simulate(config: SimulationConfig, seed: int | None = None) -> SimulatedCapt
     kind = np.where(reflected, LightPulses.REFLECTION, LightPulses.SWEEP).astype(np.int64)
     pulses = LightPulses(board.ids[row], start, end, kind)
 
-    t_traj = np.arange(0.0, config.duration_s + TRAJECTORY_STEP_S / 2, TRAJECTORY_STEP_S)
+    t_traj = np.arange(int(config.duration_s * TRAJECTORY_RATE_HZ) + 1) / TRAJECTORY_RATE_HZ
     truth = Stations(0, {i: Station(scene.T_world_lh[i], None, models[i]) for i in range(n)})
     return SimulatedCapture(angles, board, truth, Trajectory(t_traj, motion.pose(t_traj)),
                             pulses, slots, config, reflected, motion, n_samples)
