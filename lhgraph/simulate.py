@@ -89,7 +89,8 @@ class SimulationConfig:
     """Everything :func:`simulate` needs (schema in docs/simulator.md).
 
     ``board`` is a built-in board name or a board TOML path (relative to ``base_dir``);
-    ``stations`` (site-frame ``T_site_lh`` poses, n x 4 x 4) replaces ``layout`` when given;
+    ``stations`` (site-frame ``T_site_lh`` poses as ``(x, y, z, qw, qx, qy, qz)`` rows)
+    replaces ``layout`` when given;
     ``station_models`` maps station index -> factory calibration and rotor offsets;
     ``first_station`` None = drawn at random; ``clock_ppm`` = how much longer the stations'
     rotor period is on the board's clock (ppm), None = drawn at random in +-30 ppm.
@@ -99,7 +100,7 @@ class SimulationConfig:
     sample_rate_hz: float = 2e6
     board: str = "paper32"
     layout: ParametricLayout = field(default_factory=ParametricLayout)
-    stations: NDArray[np.float64] | None = None
+    stations: tuple[tuple[float, ...], ...] | None = None
     motion: MotionConfig = field(default_factory=MotionConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     visibility: VisibilityConfig = field(default_factory=VisibilityConfig)
@@ -178,7 +179,7 @@ def _parse_layout(t: _Table) -> ParametricLayout:
     return layout
 
 
-def _parse_stations(value: Any, source: str | Path) -> NDArray[np.float64]:
+def _parse_stations(value: Any, source: str | Path) -> tuple[tuple[float, ...], ...]:
     if not isinstance(value, list) or not value:
         raise InputError("expected [[stations]] tables", source, "stations")
     poses = []
@@ -189,8 +190,8 @@ def _parse_stations(value: Any, source: str | Path) -> NDArray[np.float64]:
         if not 0.9 < np.linalg.norm(q) < 1.1:
             raise InputError("quaternion norm is not ~1", source, t.key("quaternion"))
         t.finish()
-        poses.append(pose_from_quat(position, q / np.linalg.norm(q)))
-    return np.stack(poses)
+        poses.append(tuple(float(x) for x in np.r_[position, q / np.linalg.norm(q)]))
+    return tuple(poses)
 
 
 def _parse_factory(value: Any, source: str | Path, n_stations: int) -> dict[int, StationModel]:
@@ -218,7 +219,7 @@ def parse_simulation_config(data: dict[str, Any], source: str | Path,
     """Validate a parsed simulation TOML document; errors name ``source`` and the key."""
     top = _Table(data, source, "")
     d = SimulationConfig()
-    duration = top.number("duration_s", d.duration_s, 0.0, strict_low=True)
+    duration = top.number("duration_s", d.duration_s, 0.1)
     fs = top.number("sample_rate_hz", d.sample_rate_hz, 1e5)
     board = top.get("board", d.board)
     if not isinstance(board, str):
@@ -381,7 +382,9 @@ def scene_of(config: SimulationConfig) -> Scene:
     """Stations and motion centre of ``config`` in station 0's frame."""
     if config.stations is None:
         return parametric_scene(config.layout)
-    return scene_from_poses(config.stations, config.motion.centre_m, config.motion.up)
+    rows = np.asarray(config.stations, dtype=float)
+    return scene_from_poses(pose_from_quat(rows[:, :3], rows[:, 3:]), config.motion.centre_m,
+                            config.motion.up)
 
 
 def schedule(n_stations: int, duration_s: float, fs: float, first_station: int,
@@ -475,7 +478,7 @@ def simulate(config: SimulationConfig, seed: int | None = None) -> SimulatedCapt
     slots, sync_s = schedule(n, config.duration_s, fs, first, phase,
                              float(rng.uniform(0.0, SLOT_S)), period_s)
 
-    # every (slot, sensor) pair is a candidate hit
+    # every (slot, sensor) pair is a candidate hit; keep those the diode really sees
     S = len(board.ids)
     k = np.repeat(np.arange(len(slots)), S)
     row = np.tile(np.arange(S), len(slots))
@@ -487,43 +490,53 @@ def simulate(config: SimulationConfig, seed: int | None = None) -> SimulatedCapt
     keep = _visible(config.visibility, scene, board, row, station, t - t_sync,
                     T_world_board, p_lh)
     keep &= rng.random(len(keep)) >= config.noise.dropout_fraction
-    k, row, station, axis, t, p_lh = (x[keep] for x in (k, row, station, axis, t, p_lh))
-    t_sync = t_sync[keep]
+    k, row, station, axis, t, t_sync = (x[keep] for x in (k, row, station, axis, t, t_sync))
 
-    # timing noise, reflections (replacing the direct hit), pulse edges on the sample grid
-    rad_to_s = period_s / (2 * np.pi)
-    t = t + rng.normal(0.0, config.noise.angle_sigma_rad, len(t)) * rad_to_s
-    reflected = rng.random(len(t)) < config.noise.reflection_fraction
-    lo, hi = np.radians(config.noise.reflection_offset_deg)
-    offset = rng.uniform(lo, hi, len(t)) * rng.choice([-1.0, 1.0], len(t)) * rad_to_s
-    w0, w1 = np.asarray(config.visibility.window_ms) * 1e-3
-    inside = (t + offset - t_sync >= w0) & (t + offset - t_sync <= w1)
-    t = np.where(reflected, t + np.where(inside, offset, -offset), t)
-    half = pulse_width_s(np.linalg.norm(p_lh, axis=1)) / 2
+    t, reflected = _timing_noise(config, t, t_sync, period_s, rng)
+    half = pulse_width_s(np.linalg.norm(p_lh[keep], axis=1)) / 2
     start = np.ceil((t - half) * fs).astype(np.int64)
-    end = np.ceil((t + half) * fs).astype(np.int64)
-    end = np.maximum(end, start + 1)
+    end = np.maximum(np.ceil((t + half) * fs).astype(np.int64), start + 1)
     n_samples = int(round(config.duration_s * fs))
-    ok = end <= n_samples
+    # drop pulses running past the end of the capture; order rows by decoded time
+    ok = np.flatnonzero(end <= n_samples)
+    ok = ok[np.lexsort((board.ids[row[ok]], start[ok] + end[ok]))]
     k, row, station, axis, start, end, reflected = (
         x[ok] for x in (k, row, station, axis, start, end, reflected))
 
-    order = np.lexsort((board.ids[row], start + end))
-    k, row, station, axis, start, end, reflected = (
-        x[order] for x in (k, row, station, axis, start, end, reflected))
+    # decode exactly as from a capture: pulse centre vs the sweeping station's sync start
     centre = (start + end) / 2
-    sync_sample = slots.sync_start_sample[k, station]
     Ts = slots.period_samples
-    angle = (centre - sync_sample - Ts / 4) * 2 * np.pi / Ts
+    angle = (centre - slots.sync_start_sample[k, station] - Ts / 4) * 2 * np.pi / Ts
     angles = Angles(centre / fs, station.astype(np.int64), axis.astype(np.int64),
                     board.ids[row], angle, {"sweep": k.astype(np.int64)})
     kind = np.where(reflected, LightPulses.REFLECTION, LightPulses.SWEEP).astype(np.int64)
     pulses = LightPulses(board.ids[row], start, end, kind)
 
     t_traj = np.arange(int(config.duration_s * TRAJECTORY_RATE_HZ) + 1) / TRAJECTORY_RATE_HZ
-    truth = Stations(0, {i: Station(scene.T_world_lh[i], None, models[i]) for i in range(n)})
+    extra = {"simulation": {"seed": int(config.seed), "first_station": first,
+                            "clock_ppm": ppm, "rotor_period_s": period_s}}
+    truth = Stations(0, {i: Station(scene.T_world_lh[i], None, models[i]) for i in range(n)},
+                     extra)
     return SimulatedCapture(angles, board, truth, Trajectory(t_traj, motion.pose(t_traj)),
                             pulses, slots, config, reflected, motion, n_samples)
+
+
+def _timing_noise(config: SimulationConfig, t: NDArray, t_sync: NDArray, period_s: float,
+                  rng: np.random.Generator) -> tuple[NDArray, NDArray[np.bool_]]:
+    """Hit times with Gaussian angle noise and reflections, and the reflection mask.
+
+    A reflection replaces the direct hit by one offset by ``reflection_offset_deg`` (random
+    sign, flipped when that keeps it inside the sweep window).
+    """
+    noise = config.noise
+    rad_to_s = period_s / (2 * np.pi)
+    t = t + rng.normal(0.0, noise.angle_sigma_rad, len(t)) * rad_to_s
+    reflected = rng.random(len(t)) < noise.reflection_fraction
+    lo, hi = np.radians(noise.reflection_offset_deg)
+    offset = rng.uniform(lo, hi, len(t)) * rng.choice([-1.0, 1.0], len(t)) * rad_to_s
+    w0, w1 = np.asarray(config.visibility.window_ms) * 1e-3
+    inside = (t + offset - t_sync >= w0) & (t + offset - t_sync <= w1)
+    return np.where(reflected, t + np.where(inside, offset, -offset), t), reflected
 
 
 def _visible(vis: VisibilityConfig, scene: Scene, board: Board, row: NDArray, station: NDArray,
