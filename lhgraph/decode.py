@@ -16,15 +16,18 @@ the output; angles in radians.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .angles import Angles
+from .angles import Angles, save_angles
 from .board import Board
-from .calibration import StationCalibration
-from .capture import Capture, edges_to_pulses
+from .calibration import StationCalibration, save_calibration
+from .capture import Capture, edges_to_pulses, read_capture, read_raw_dump
 from .errors import InputError
+from .fileio import check_writable
+from .libsurvive import read_libsurvive
 from .ootx import OotxDecoder, unpack_payload
 from .signal import LightPulses
 
@@ -483,3 +486,59 @@ def _ootx(slot: NDArray, role: NDArray, data: NDArray, report: DecodeReport
         else:
             report.notes.append(f"station {r}: no complete OOTX frame (needs ~3 s of flashes)")
     return out
+
+
+FORMATS = ("lhcap", "raw", "libsurvive")
+ANGLES_FILE = "angles.csv"
+OOTX_FILE = "ootx.toml"
+
+
+def guess_format(path: str | Path) -> str:
+    """Input format from the file name: ``.lhcap``, ``.raw``/``.bin``, ``.rec``/``.rec.gz``."""
+    name = Path(path).name.lower()
+    if name.endswith(".lhcap"):
+        return "lhcap"
+    if name.endswith((".raw", ".bin")):
+        return "raw"
+    if name.endswith((".rec", ".rec.gz")):
+        return "libsurvive"
+    raise InputError("cannot tell the format from the name; give --format "
+                     f"({'|'.join(FORMATS)})", path)
+
+
+def decode_file(path: str | Path, fmt: str | None = None, device: str | None = None,
+                board: Board | None = None, options: DecodeOptions | None = None,
+                sample_rate_hz: float | None = None) -> tuple[DecodeResult, list[str]]:
+    """Read and decode a capture file -> (result, reader warnings).
+
+    ``lhcap``: the board's edge file; ``raw``: a raw sample dump (``sample_rate_hz``, default
+    2 MHz; channel k = sensor k); ``libsurvive``: one ``device``'s raw light of a libsurvive
+    recording (48 MHz ticks from the device's first pulse; default period ``nominal``, as
+    libsurvive decodes).
+    """
+    fmt = fmt or guess_format(path)
+    if fmt == "libsurvive":
+        recording = read_libsurvive(path, device)
+        options = options or DecodeOptions(period="nominal")
+        return decode_pulses(recording.pulses, recording.sample_rate_hz, board, options), []
+    if fmt == "raw":
+        capture = read_raw_dump(path, int(sample_rate_hz or 2_000_000))
+        warnings: list[str] = []
+    elif fmt == "lhcap":
+        capture, warnings = read_capture(path)
+    else:
+        raise InputError(f"unknown format {fmt!r} (expected {'|'.join(FORMATS)})")
+    return decode_capture(capture, board, options), warnings
+
+
+def write_decoded(result: DecodeResult, out_dir: str | Path, overwrite: bool = False
+                  ) -> list[Path]:
+    """Write ``angles.csv`` and (when any station's OOTX decoded) ``ootx.toml``."""
+    out_dir = Path(out_dir)
+    targets = [out_dir / ANGLES_FILE] + ([out_dir / OOTX_FILE] if result.calibrations else [])
+    for target in targets:
+        check_writable(target, overwrite)
+    written = [save_angles(result.angles, targets[0], overwrite)]
+    if result.calibrations:
+        written.append(save_calibration(result.calibrations, targets[1], overwrite))
+    return written

@@ -63,47 +63,54 @@ def _open_text(path: Path):
     return path.open("r", errors="replace")
 
 
-def read_libsurvive(path: str | Path, device: str) -> LibsurviveRecording:
-    """Read one device's light pulses and angles from a libsurvive recording."""
+def read_libsurvive(path: str | Path, device: str | None = None) -> LibsurviveRecording:
+    """Read one device's light pulses and angles from a libsurvive recording.
+
+    ``device`` (e.g. ``"HMD"``) may be omitted when only one device has light data.
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError("file not found" if not path.exists() else "not a file", path)
-    c_rows: list[list[str]] = []
-    a_rows: list[list[str]] = []
-    devices: set[str] = set()
+    c_rows: dict[str, list[list[str]]] = {}
+    a_rows: dict[str, list[list[str]]] = {}
     try:
         with _open_text(path) as f:
             for line in f:
                 parts = line.split()
                 if len(parts) < 3:
                     continue
-                if parts[2] == "C":
-                    devices.add(parts[1])
-                    if parts[1] == device:
-                        c_rows.append(parts[3:6])
-                elif parts[2] == "A" and parts[1] == device:
-                    a_rows.append(parts[3:9])
-    except (OSError, EOFError, gzip.BadGzipFile) as exc:
+                if parts[2] == "C" and len(parts) >= 6:
+                    c_rows.setdefault(parts[1], []).append(parts[3:6])
+                elif parts[2] == "A" and len(parts) >= 9:
+                    a_rows.setdefault(parts[1], []).append(parts[3:9])
+    except (OSError, EOFError, UnicodeDecodeError) as exc:
         if not c_rows:
             raise InputError(f"unreadable recording ({exc})", path) from None
         # a truncated gzip keeps the lines read so far
-    if not c_rows:
-        found = ", ".join(sorted(devices)) or "none"
-        raise InputError(f"no raw light ('C') lines for device {device!r} (devices with light: "
-                         f"{found})", path)
+    found = ", ".join(sorted(c_rows)) or "none"
+    if device is None:
+        if len(c_rows) != 1:
+            raise InputError(f"give the device (devices with light data: {found})", path)
+        device = next(iter(c_rows))
+    if device not in c_rows:
+        raise InputError(f"no raw light ('C') lines for device {device!r} (devices with light "
+                         f"data: {found})", path)
+    return _recording(path, device, c_rows[device], a_rows.get(device, []))
+
+
+def _recording(path: Path, device: str, c_rows: list[list[str]], a_rows: list[list[str]]
+               ) -> LibsurviveRecording:
     try:
         c = np.array(c_rows, dtype=np.int64)
         a = np.array(a_rows, dtype=float).reshape(-1, 6)
     except ValueError:
         raise InputError("malformed C or A line", path) from None
-    raw = c[:, 1]
-    first = int(raw[0])
-    ticks = _unwrap32(np.r_[raw, a[:, 2].astype(np.int64)]) - first
-    start, a_ticks = ticks[: len(raw)], ticks[len(raw):]
+    first = int(c[0, 1])
+    start = _unwrap32(c[:, 1]) - first
     pulses = LightPulses(c[:, 0], start, start + c[:, 2], np.full(len(c), -1, np.int64))
-    angles = LibsurviveAngles(a[:, 0].astype(np.int64), a[:, 1].astype(np.int64),
-                              _unwrap_near(a_ticks, start), a[:, 3], a[:, 4],
-                              a[:, 5].astype(np.int64))
+    a_ticks = _unwrap_near(a[:, 2].astype(np.int64) - first, start)
+    angles = LibsurviveAngles(a[:, 0].astype(np.int64), a[:, 1].astype(np.int64), a_ticks,
+                              a[:, 3], a[:, 4], a[:, 5].astype(np.int64))
     return LibsurviveRecording(device, pulses, angles, first)
 
 
