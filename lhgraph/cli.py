@@ -39,6 +39,8 @@ def add_simulate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("config", nargs="?", help="simulation TOML (default: the bundled default)")
     p.add_argument("--output", "-o", required=True, help="output directory")
     p.add_argument("--seed", type=int, help="random seed (overrides the config's seed)")
+    p.add_argument("--capture", action="store_true",
+                   help="also write the raw signal a board would record (capture.lhcap)")
     _add_common_output(p)
     return p
 
@@ -54,7 +56,14 @@ def run_simulate(args: argparse.Namespace) -> int:
     config = (default_simulation_config() if args.config is None
               else load_simulation_config(args.config))
     capture = simulate(config, args.seed)
+    if args.capture:
+        from .capture_sim import CAPTURE_FILE, write_simulated_capture
+        from .fileio import check_writable
+
+        check_writable(f"{args.output}/{CAPTURE_FILE}", args.force)
     paths = write_simulation(capture, args.output, overwrite=args.force)
+    if args.capture:
+        paths["capture"] = write_simulated_capture(capture, args.output, args.force)
     if not args.quiet:
         print(f"{capture.summary()}; wrote {', '.join(p.name for p in paths.values())} "
               f"to {args.output}")
@@ -62,6 +71,53 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 
 COMMANDS.append(("simulate", add_simulate, run_simulate))
+
+
+# --- decode ---
+
+
+def add_decode(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("decode", help="decode a capture into angles and OOTX calibration",
+                       description="Decode a board capture (.lhcap), a raw sample dump or a "
+                       "libsurvive recording into DIR/angles.csv and DIR/ootx.toml "
+                       "(docs/decoding.md).")
+    p.add_argument("capture", help="capture file")
+    p.add_argument("--output", "-o", required=True, help="output directory")
+    p.add_argument("--format", choices=("lhcap", "raw", "libsurvive"),
+                   help="input format (default: from the file name)")
+    p.add_argument("--device", help="libsurvive device name (e.g. HMD)")
+    p.add_argument("--board", help="board TOML: drop pulses of sensors not on it")
+    p.add_argument("--sample-rate", type=float, help="raw dump sample rate in Hz (2e6)")
+    p.add_argument("--period", choices=("fit", "nominal"),
+                   help="rotor period: fitted to the sync train or 1/60 s (default: fit; "
+                   "nominal for libsurvive recordings)")
+    p.add_argument("--sync", choices=("measured", "fitted"), default="measured",
+                   help="time sweeps from each measured sync flash or from the fitted train")
+    _add_common_output(p)
+    return p
+
+
+def run_decode(args: argparse.Namespace) -> int:
+    from .board import load_board
+    from .decode import DecodeOptions, decode_file, write_decoded
+
+    board = load_board(args.board) if args.board else None
+    period = args.period or ("nominal" if args.format == "libsurvive"
+                             or str(args.capture).endswith((".rec", ".rec.gz")) else "fit")
+    options = DecodeOptions(period=period, sync_reference=args.sync)
+    result, warnings = decode_file(args.capture, args.format, args.device, board, options,
+                                   args.sample_rate)
+    written = write_decoded(result, args.output, overwrite=args.force)
+    if not args.quiet:
+        for line in [*warnings, *result.report.lines()]:
+            print(f"  {line}", file=sys.stderr)
+        print(f"{len(result.angles)} sweep hits, OOTX of station(s) "
+              f"{sorted(result.calibrations) or 'none'}; wrote "
+              f"{', '.join(str(p) for p in written)}")
+    return 0
+
+
+COMMANDS.append(("decode", add_decode, run_decode))
 
 
 def build_parser() -> argparse.ArgumentParser:
