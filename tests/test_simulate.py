@@ -313,7 +313,7 @@ def test_bundled_default_equals_repo_copy():
         default_simulation_config(), base_dir=str(SIM_CONFIGS))
 
 
-@pytest.mark.parametrize("name", ["default", "facing", "ninety", "far", "fast"])
+@pytest.mark.parametrize("name", ["default", "facing", "ninety", "far", "fast", "realistic"])
 def test_shipped_configs_load(name):
     config = load_simulation_config(SIM_CONFIGS / f"{name}.toml")
     scene = scene_of(config)
