@@ -120,6 +120,44 @@ def run_decode(args: argparse.Namespace) -> int:
 COMMANDS.append(("decode", add_decode, run_decode))
 
 
+# --- capture ---
+
+
+def add_capture(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("capture", help="record a capture with the board and download it",
+                       description="Arm the photodiode board, wait for the capture and download "
+                       "it as a .lhcap file (docs/protocol.md). Exit code 1 for device or link "
+                       "failures, 2 for bad arguments or an existing output.")
+    p.add_argument("--port", required=True, help="serial port of the board (e.g. /dev/ttyUSB0)")
+    p.add_argument("--output", "-o", required=True, help=".lhcap file to write")
+    p.add_argument("--duration", type=float, default=8.0, help="capture length in s (default 8)")
+    p.add_argument("--delay", type=float, default=0.0, help="start delay in s (default 0)")
+    p.add_argument("--baud", type=int, default=6_000_000, help="baud rate (default 6000000)")
+    p.add_argument("--no-arm", action="store_true",
+                   help="download the capture the board already holds; do not record")
+    _add_common_output(p)
+    return p
+
+
+def run_capture(args: argparse.Namespace) -> int:
+    from .capture_client import ProgressBar, download_capture
+
+    bar = None if args.quiet else ProgressBar(sys.stderr)
+    try:
+        result = download_capture(args.port, args.output, duration_s=args.duration,
+                                  overwrite=args.force, progress=bar, baudrate=args.baud,
+                                  start_delay_s=args.delay, arm=not args.no_arm)
+    finally:
+        if bar is not None:
+            bar.close()
+    if not args.quiet:
+        print(result.summary())
+    return 0
+
+
+COMMANDS.append(("capture", add_capture, run_capture))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``lhgraph`` argument parser with every registered command."""
     parser = argparse.ArgumentParser(

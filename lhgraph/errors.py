@@ -40,3 +40,10 @@ class SolverError(LhgraphError):
     """The data cannot determine what was asked (e.g. a station never seen, no overlap)."""
 
     exit_code = 3
+
+
+class DeviceError(LhgraphError):
+    """The capture board or its link failed (no answer, refused command, damaged transfer):
+    exit code 1."""
+
+    exit_code = 1
