@@ -10,7 +10,7 @@
  * Fault injection (board -> host direction): --drop-every N drops every Nth byte sent,
  * --flip-every N flips one bit of every Nth byte sent, --disconnect-after-blocks N closes the
  * pty after N READ responses and opens a new one (--link keeps a stable path, like a
- * /dev/serial/by-id link), --baud B paces the output at B baud (10 bits per byte). */
+ * /dev/serial/by-id link; --disconnects K times, each N blocks after the last reconnect), --baud B paces the output at B baud (10 bits per byte). */
 #include <errno.h>
 #include <fcntl.h>
 #include <poll.h>
@@ -438,6 +438,7 @@ int main(int argc, char **argv)
     }
 
     uint32_t disconnects_done = 0;
+    uint32_t blocks_at_connect = 0; /* --disconnect-after-blocks counts from each (re)connect */
     uint8_t rx[512];
     while (!g_stop) {
         struct pollfd pfd = {g_pty.master, POLLIN, 0};
@@ -454,7 +455,7 @@ int main(int argc, char **argv)
         replay_step();
         lhb_capture_poll(&g_cap, now_ms());
         if (g_opt.disconnect_after != 0 && disconnects_done < g_opt.disconnects &&
-            g_proto.blocks_sent >= g_opt.disconnect_after * (disconnects_done + 1u)) {
+            g_proto.blocks_sent - blocks_at_connect >= g_opt.disconnect_after) {
             disconnects_done++;
             if (g_opt.verbose) {
                 fprintf(stderr, "virtual_board: disconnect %u after %u blocks\n",
@@ -469,6 +470,7 @@ int main(int argc, char **argv)
                 die("pty");
             }
             lhb_cobs_dec_init(&g_proto.dec, g_proto.rx_raw, sizeof g_proto.rx_raw);
+            blocks_at_connect = g_proto.blocks_sent;
         }
     }
     pty_close(&g_pty);
