@@ -398,7 +398,7 @@ def _sweep_angles(pulses: LightPulses, is_sweep: NDArray, pattern: _Pattern, slo
         length = np.array([fits.get(r, (np.nan, 0))[0] for r in (0, 1)])[st]
         offset = np.array([fits.get(r, (0, np.nan))[1] for r in (0, 1)])[st]
         t_sync = offset + n * length
-        reason = "sweep pulses of a station without a sync train"
+        report.drop("sweep pulses of a station without a sync train", np.count_nonzero(~known))
     else:
         known, t_sync, extrapolated = _own_sync(n, st, slot, role, sync_start, fits)
         report.drop("sweep pulses before their sweeping station's first sync flash",
@@ -406,11 +406,10 @@ def _sweep_angles(pulses: LightPulses, is_sweep: NDArray, pattern: _Pattern, slo
         if np.any(extrapolated & known):
             report.notes.append(f"{np.count_nonzero(extrapolated & known)} sweep pulses timed "
                                 "from an earlier flash of their station (sync flash missed)")
-        reason = ""
-    if reason:
-        report.drop(reason, np.count_nonzero(~known))
     p, centre, n, st, axis, t_sync = (_select(p, known), centre[known], n[known], st[known],
                                       axis[known], t_sync[known])
+    if len(p) == 0:
+        return _empty_angles()
     # one hit per (sensor, slot): the longest pulse; too many pulses = noise
     width = (p.end - p.start).astype(float)
     order = np.lexsort((-width, p.sensor, n))

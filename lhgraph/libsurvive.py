@@ -154,3 +154,24 @@ def read_libsurvive_calibration(path: str | Path) -> dict[int, StationCalibratio
     if not out:
         raise InputError('no "lighthouseN" entries', path)
     return out
+
+
+def match_angles(recording: LibsurviveRecording, times_s: NDArray, sensors: NDArray
+                 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Pair libsurvive's ``A`` rows with decoded hits (time = pulse centre, s from the
+    device's first pulse) of the same pulse: returns (A row indices, hit indices)."""
+    p, a = recording.pulses, recording.angles
+    rate = recording.sample_rate_hz
+    pulse_key = p.start * 64 + p.sensor
+    order = np.argsort(pulse_key)
+    pos = np.clip(np.searchsorted(pulse_key[order], a.timecode * 64 + a.sensor), 0,
+                  len(order) - 1)
+    has_pulse = pulse_key[order][pos] == a.timecode * 64 + a.sensor
+    length = (p.end - p.start)[order][pos]
+    a_key = (2 * a.timecode + length) * 64 + a.sensor  # twice the centre, in ticks
+    hit_key = np.round(2 * np.asarray(times_s) * rate).astype(np.int64) * 64 + sensors
+    hit_order = np.argsort(hit_key)
+    hpos = np.clip(np.searchsorted(hit_key[hit_order], a_key), 0, max(len(hit_key) - 1, 0))
+    found = has_pulse & (len(hit_key) > 0)
+    found &= hit_key[hit_order][hpos] == a_key if len(hit_key) else found
+    return np.flatnonzero(found), hit_order[hpos[found]]
