@@ -73,6 +73,66 @@ def run_simulate(args: argparse.Namespace) -> int:
 COMMANDS.append(("simulate", add_simulate, run_simulate))
 
 
+# --- solve ---
+
+
+def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("solve", help="calibrate the station poses",
+                       description="Calibrate the stations' poses from a board capture's angles "
+                       "(docs/solve.md). Either a CONFIG.toml or --board/--angles/--output.")
+    p.add_argument("config", nargs="?", help="solve configuration TOML")
+    p.add_argument("--board", help="board TOML")
+    p.add_argument("--angles", help="angles CSV")
+    p.add_argument("--output", "-o", help="stations TOML to write")
+    p.add_argument("--method", choices=("graph", "paper"), help="default: graph")
+    p.add_argument("--trajectory", help="also write the board trajectory CSV")
+    p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
+    p.add_argument("--truth", help="true stations TOML: print the errors")
+    p.add_argument("--reference", type=int, help="station index of the world frame")
+    _add_common_output(p)
+    return p
+
+
+def run_solve(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .errors import InputError
+    from .metrics import station_errors
+    from .report import print_solution
+    from .solve import SolveConfig, load_solve_config, run_config, write_solution
+    from .stations import load_stations
+
+    if args.config:
+        config = load_solve_config(args.config)
+    else:
+        missing = [o for o in ("board", "angles", "output") if getattr(args, o) is None]
+        if missing:
+            raise InputError("give a CONFIG.toml or all of --board, --angles, --output "
+                             f"(missing: {', '.join('--' + m for m in missing)})")
+        config = SolveConfig(Path(args.board), Path(args.angles), Path(args.output))
+    for key in ("output", "method", "trajectory", "calibration", "truth", "reference"):
+        value = getattr(args, key)
+        if value is not None:
+            setattr(config, key, Path(value) if key not in ("method", "reference") else value)
+    if config.output is None:
+        raise InputError("no output: give --output or set 'output' in the config")
+    for target in (config.output, config.trajectory):
+        if target is not None and Path(target).exists() and not args.force:
+            raise InputError("exists already (use --force to overwrite)", target)
+    truth = load_stations(config.truth) if config.truth else None
+    progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
+    result = run_config(config, progress)
+    written = write_solution(result, config.output, config.trajectory, overwrite=args.force)
+    errors = station_errors(truth, result.stations) if truth else None
+    if not args.quiet:
+        print_solution(result, errors)
+        print(f"wrote {', '.join(str(p) for p in written)}")
+    return 0
+
+
+COMMANDS.append(("solve", add_solve, run_solve))
+
+
 # --- decode ---
 
 

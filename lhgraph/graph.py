@@ -44,7 +44,8 @@ Progress = Callable[[str], None]
 class GraphOptions:
     """Solver settings (units in the names; defaults suit 2 MHz LH1 captures).
 
-    ``angle_sigma_rad``: per-diode angle noise; ``huber_k``: Huber threshold in sigmas;
+    ``angle_sigma_rad``: per-diode angle noise; ``loss``: per-diode robust loss
+    (``"cauchy"`` or ``"huber"``) and ``huber_k`` its scale in sigmas;
     ``accel_psd_rot``/``accel_psd_pos``: power spectral density of the board's angular
     (rad^2/s^3) and linear (m^2/s^3) acceleration noise in the motion prior; ``solver``:
     ``"lm"`` (Levenberg-Marquardt on GTSAM's linear solver) or ``"isam2"``;
@@ -54,6 +55,7 @@ class GraphOptions:
 
     angle_sigma_rad: float = 8e-5
     huber_k: float = 3.0
+    loss: str = "cauchy"
     accel_psd_rot: float = 200.0
     accel_psd_pos: float = 20.0
     solver: str = "lm"
@@ -270,7 +272,11 @@ def build_graph(problem: GraphProblem, options: GraphOptions
     """The nonlinear factor graph of ``problem`` (named noise models, one factor per sweep)."""
     ev = _Evaluator(problem)
     graph = gtsam.NonlinearFactorGraph()
-    huber = gtsam.noiseModel.mEstimator.Huber.Create(
+    estimators = {"huber": gtsam.noiseModel.mEstimator.Huber,
+                  "cauchy": gtsam.noiseModel.mEstimator.Cauchy}
+    if options.loss not in estimators:
+        raise SolverError(f"unknown loss '{options.loss}' (expected huber or cauchy)")
+    huber = estimators[options.loss].Create(
         options.huber_k, gtsam.noiseModel.mEstimator.Base.ReweightScheme.Scalar)
     for k in range(problem.n_states):
         a, b = problem.bounds[k], problem.bounds[k + 1]
@@ -430,8 +436,8 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
             warnings.append(f"station {sid}: weak link to the reference (position sigma "
                             f"{sigma_m * 1e3:.0f} mm); the board was rarely seen by both")
     h = problem.hits
-    sigma_r = ev.r / options.angle_sigma_rad
-    weight = np.minimum(1.0, options.huber_k / np.maximum(np.abs(sigma_r), 1e-12))
+    z = np.abs(ev.r) / (options.angle_sigma_rad * options.huber_k)
+    weight = 1.0 / (1.0 + z**2) if options.loss == "cauchy" else np.minimum(1.0, 1.0 / z)
     rows = problem.hit_rows
     residuals = Residuals(angles.time[rows], angles.lighthouse[rows], h.axis,
                           angles.sensor[rows], -ev.r, weight)

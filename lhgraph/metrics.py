@@ -31,12 +31,17 @@ class PoseError:
 
 
 def station_errors(truth: Stations, estimate: Stations) -> list[PoseError]:
-    """Errors of every non-reference station present in both sets (reference frames aligned)."""
-    t = truth.relative_to_reference()
+    """Errors of every station but the estimate's reference, present in both sets.
+
+    Both sets are re-expressed in the frame of the estimate's reference station, so a truth
+    given in any world frame (or with another reference) compares correctly.
+    """
+    ref = estimate.reference
+    t = Stations(ref, truth.stations).relative_to_reference()
     e = estimate.relative_to_reference()
     out = []
     for k in t.indices():
-        if k == t.reference or k not in e.stations:
+        if k == ref or k not in e.stations:
             continue
         Tt, Te = t.pose(k), e.pose(k)
         dp = np.abs(Te[:3, 3] - Tt[:3, 3])

@@ -61,9 +61,16 @@ def _homography_poses(uv: Array, mask: NDArray[np.bool_], plane_xy: Array) -> Ar
     A = np.zeros((M, 2 * S, 9))
     A[:, 0::2, :] = np.stack([X, Y, one, zero, zero, zero, -u * X, -u * Y, -u], axis=-1)
     A[:, 1::2, :] = np.stack([zero, zero, zero, X, Y, one, -v * X, -v * Y, -v], axis=-1)
-    A *= np.repeat(mask, 2, axis=1)[..., None]
-    _, _, Vt = np.linalg.svd(A)
-    H = Vt[:, -1, :].reshape(M, 3, 3) * np.array([1 / scale, 1 / scale, 1.0])
+    weights = mask.astype(float)
+    for _ in range(4):  # iteratively reweighted DLT: Cauchy weights on the transfer error
+        _, _, Vt = np.linalg.svd(A * np.repeat(weights, 2, axis=1)[..., None])
+        h = Vt[:, -1, :]
+        proj = np.stack([X, Y, one], axis=-1) @ h.reshape(M, 3, 3).transpose(0, 2, 1)
+        err = np.hypot(proj[..., 0] / proj[..., 2] - u, proj[..., 1] / proj[..., 2] - v)
+        typical = np.nanmedian(np.where(mask, err, np.nan), axis=1, keepdims=True)
+        scale_err = np.maximum(1.5 * typical, 1e-3)
+        weights = mask / (1.0 + (err / scale_err) ** 2)
+    H = h.reshape(M, 3, 3) * np.array([1 / scale, 1 / scale, 1.0])
     h1, h2, h3 = H[:, :, 0], H[:, :, 1], H[:, :, 2]
     lam = 2.0 / (np.linalg.norm(h1, axis=1) + np.linalg.norm(h2, axis=1))
     lam *= np.where(h3[:, 2] < 0, -1.0, 1.0)
@@ -79,8 +86,11 @@ def _homography_poses(uv: Array, mask: NDArray[np.bool_], plane_xy: Array) -> Ar
 def _refine(
     T: Array, meas: Array, mask: NDArray[np.bool_], positions: Array, model: StationModel,
     iterations: int, huber_rad: float,
-) -> tuple[Array, Array]:
-    """Gauss-Newton (Huber-weighted) on the full model; returns poses and rms residual."""
+) -> tuple[Array, Array, Array]:
+    """Gauss-Newton (Huber-weighted) on the full model.
+
+    Returns poses, rms residual (rad) and each sensor's larger absolute residual (M, S).
+    """
     M, S = mask.shape
     s = np.broadcast_to(positions, (M, S, 3)).reshape(-1, 3)
     m = mask.reshape(-1)
@@ -105,40 +115,18 @@ def _refine(
             break
     n = np.maximum(2 * mask.sum(axis=1), 1)
     rms = np.sqrt(np.sum(r**2, axis=1) / n)
-    return T, rms
+    worst = np.max(np.abs(r.reshape(M, 2, S)), axis=1)
+    return T, rms, worst
 
 
-def board_poses(
-    azimuth: Array,
-    elevation: Array,
-    positions: Array,
-    normals: Array,
-    model: StationModel = IDEAL,
-    iterations: int = 15,
-    min_sensors: int = 5,
-    huber_rad: float = 1e-3,
-) -> PnPResult:
-    """Board poses ``T_lh_board`` from measured angles ``(M, S)`` (rad, NaN = not seen).
-
-    ``positions``/``normals`` (S, 3) are the board sensors (board frame). Measurements with
-    fewer than ``min_sensors`` sensors seen on both axes get NaN poses and rms.
-    """
-    azimuth = np.asarray(azimuth, dtype=float)
-    elevation = np.asarray(elevation, dtype=float)
-    mask = np.isfinite(azimuth) & np.isfinite(elevation)
-    n = mask.sum(axis=1)
-    ok = n >= min_sensors
-    M = len(azimuth)
-    T_out = np.full((M, 4, 4), np.nan)
-    rms_out = np.full(M, np.nan)
-    if not np.any(ok):
-        return PnPResult(T_out, rms_out, n)
-    az, el, mk = azimuth[ok], elevation[ok], mask[ok]
-    meas = np.stack([np.nan_to_num(az), np.nan_to_num(el)], axis=-1)
+def _solve_candidates(
+    uv: Array, meas: Array, mask: NDArray[np.bool_], positions: Array, normals: Array,
+    model: StationModel, iterations: int, huber_rad: float,
+) -> tuple[Array, Array, Array]:
+    """Homography pose and its planar mirror, both refined; the better one per measurement."""
     c, B = _board_plane(positions, normals)
     plane_xy = (positions - c) @ B[:, :2]
-    uv = np.stack([np.tan(az), np.tan(el)], axis=-1)
-    T_cam_plane = _homography_poses(uv, mk, plane_xy)
+    T_cam_plane = _homography_poses(uv, mask, plane_xy)
     # T_lh_board = P^T T_cam_plane [B^T, -B^T c]
     T_plane_board = make_pose(B.T, -B.T @ c)
     T_lh_cam = make_pose(_P_CAM_LH.T, np.zeros(3))
@@ -155,11 +143,53 @@ def board_poses(
     T1 = T0.copy()
     T1[:, :3, :3] = R_rot @ T0[:, :3, :3]
     T1[:, :3, 3] = c_lh - T1[:, :3, :3] @ c
-    Ta, rms_a = _refine(T0, meas, mk, positions, model, iterations, huber_rad)
-    Tb, rms_b = _refine(T1, meas, mk, positions, model, iterations, huber_rad)
+    Ta, rms_a, worst_a = _refine(T0, meas, mask, positions, model, iterations, huber_rad)
+    Tb, rms_b, worst_b = _refine(T1, meas, mask, positions, model, iterations, huber_rad)
     better_b = (rms_b < rms_a) | ~np.isfinite(rms_a)
-    T = np.where(better_b[:, None, None], Tb, Ta)
-    rms = np.where(better_b, rms_b, rms_a)
+    return (np.where(better_b[:, None, None], Tb, Ta), np.where(better_b, rms_b, rms_a),
+            np.where(better_b[:, None], worst_b, worst_a))
+
+
+def board_poses(
+    azimuth: Array,
+    elevation: Array,
+    positions: Array,
+    normals: Array,
+    model: StationModel = IDEAL,
+    iterations: int = 15,
+    min_sensors: int = 5,
+    huber_rad: float = 1e-3,
+    outlier_factor: float = 5.0,
+    outlier_floor_rad: float = 3e-3,
+) -> PnPResult:
+    """Board poses ``T_lh_board`` from measured angles ``(M, S)`` (rad, NaN = not seen).
+
+    ``positions``/``normals`` (S, 3) are the board sensors (board frame). Measurements with
+    fewer than ``min_sensors`` sensors seen on both axes get NaN poses and rms. Sensors whose
+    residual exceeds ``outlier_factor`` times the measurement's median (and
+    ``outlier_floor_rad``) are dropped and the pose solved again; ``rms_rad`` is over the
+    sensors kept.
+    """
+    azimuth = np.asarray(azimuth, dtype=float)
+    elevation = np.asarray(elevation, dtype=float)
+    mask = np.isfinite(azimuth) & np.isfinite(elevation)
+    n = mask.sum(axis=1)
+    ok = n >= min_sensors
+    M = len(azimuth)
+    T_out = np.full((M, 4, 4), np.nan)
+    rms_out = np.full(M, np.nan)
+    if not np.any(ok):
+        return PnPResult(T_out, rms_out, n)
+    az, el, mk = azimuth[ok], elevation[ok], mask[ok]
+    meas = np.stack([np.nan_to_num(az), np.nan_to_num(el)], axis=-1)
+    uv = np.stack([np.tan(az), np.tan(el)], axis=-1)
+    used = mk
+    for _ in range(2):  # the second round drops gross outliers (reflections)
+        T, rms, worst = _solve_candidates(uv, meas, used, positions, normals, model,
+                                          iterations, huber_rad)
+        typical = np.nanmedian(np.where(used, worst, np.nan), axis=1, keepdims=True)
+        inlier = mk & (worst < np.maximum(outlier_factor * typical, outlier_floor_rad))
+        used = np.where((inlier.sum(axis=1) >= min_sensors)[:, None], inlier, mk)
     in_front = T[:, 0, 3] > 0
     T_out[ok] = np.where(in_front[:, None, None], T, np.nan)
     rms_out[ok] = np.where(in_front, rms, np.nan)

@@ -1,0 +1,160 @@
+"""Contract files: round trips and one-line errors (file, row/key, exit code 2)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lhgraph.angles import Angles, load_angles, save_angles
+from lhgraph.board import load_board, make_board, save_board
+from lhgraph.calibration import StationCalibration, load_calibration, save_calibration
+from lhgraph.errors import InputError
+from lhgraph.metrics import station_errors
+from lhgraph.model import FactoryCalibration, StationModel
+from lhgraph.stations import Station, Stations, load_stations, save_stations
+from lhgraph.trajectory import Trajectory, load_trajectory, save_trajectory
+from lhgraph.transforms import se3_exp, so3_exp
+
+HEADER = "time,lighthouse,axis,sensor,angle\n"
+
+
+def _write(tmp_path: Path, name: str, text: str) -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_angles_round_trip_with_extra_column(tmp_path):
+    rng = np.random.default_rng(0)
+    n = 50
+    a = Angles(np.sort(rng.uniform(0, 1, n)), rng.integers(0, 2, n), rng.integers(0, 2, n),
+               rng.integers(0, 32, n), rng.uniform(-1, 1, n), {"sweep": np.arange(n)})
+    path = save_angles(a, tmp_path / "a.csv")
+    b = load_angles(path)
+    np.testing.assert_allclose(b.time, a.time, atol=1e-9)
+    np.testing.assert_array_equal(b.sensor, a.sensor)
+    np.testing.assert_allclose(b.angle, a.angle, rtol=1e-11)
+    np.testing.assert_array_equal(b.extra["sweep"], a.extra["sweep"])
+    with pytest.raises(InputError, match="exists already"):
+        save_angles(a, path)
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("time,lighthouse,axis,angle\n0.1,0,0,0.2\n", "missing column"),
+    (HEADER + "0.1,0,0,3,nan\n", "value is nan"),
+    (HEADER + "0.1,0,0,3,abc\n", "expected a number"),
+    (HEADER + "0.1,0,2,3,0.1\n", "axis must be 0 or 1"),
+    (HEADER + "0.2,0,0,3,0.1\n0.1,0,0,3,0.1\n", "time goes backwards"),
+    (HEADER + "0.1,0,0,3.5,0.1\n", "expected an integer"),
+    (HEADER + "0.1,0,0,3\n", "expected 5 fields"),
+    (HEADER, "no rows"),
+    ("", "empty file"),
+])
+def test_bad_angles_name_file_and_row(tmp_path, text, message):
+    path = _write(tmp_path, "bad.csv", text)
+    with pytest.raises(InputError, match=message) as info:
+        load_angles(path)
+    assert str(path) in str(info.value)
+
+
+def test_board_round_trip_and_unknown_sensor(tmp_path):
+    rng = np.random.default_rng(1)
+    board = make_board(rng.normal(size=(5, 3)), rng.normal(size=(5, 3)), [3, 1, 4, 10, 5], "b")
+    path = save_board(board, tmp_path / "b.toml")
+    back = load_board(path)
+    np.testing.assert_array_equal(back.ids, board.ids)
+    np.testing.assert_allclose(back.positions, board.positions)
+    np.testing.assert_allclose(np.linalg.norm(back.normals, axis=1), 1.0)
+    np.testing.assert_array_equal(back.index_of([10, 3]), [3, 0])
+    with pytest.raises(InputError, match=r"sensor id\(s\) \[7\]"):
+        back.index_of([3, 7], "angles.csv")
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("[[sensors]]\nid = 1\nposition = [0, 0]\nnormal = [0, 0, 1]\n",
+     r"sensors\[0\]\.position: expected a list of 3"),
+    ("[[sensors]]\nid = 1\nnormal = [0, 0, 1]\n", "missing key 'position'"),
+    ("[[sensors]]\nid = 'a'\nposition = [0, 0, 0]\nnormal = [0, 0, 1]\n", "expected an integer"),
+    ("sensors = 3\n", "at least one"),
+    ("[[sensors]\n", "not valid TOML"),
+])
+def test_bad_board(tmp_path, text, message):
+    path = _write(tmp_path, "board.toml", text)
+    with pytest.raises(InputError, match=message):
+        load_board(path)
+
+
+def test_stations_round_trip_with_covariance_and_calibration(tmp_path):
+    cal = FactoryCalibration(phase=[0.01, 0.02], tilt=[0.0, 0.001], curve=[0.0, 0.0],
+                             gibphase=[1.0, 2.0], gibmag=[0.003, 0.0])
+    T1 = se3_exp([0.1, 0.2, 0.3, 1.0, 2.0, 0.5])
+    stations = Stations(0, {0: Station(np.eye(4)),
+                            1: Station(T1, np.diag(np.arange(1.0, 7.0)), StationModel(cal))})
+    path = save_stations(stations, tmp_path / "s.toml")
+    back = load_stations(path)
+    np.testing.assert_allclose(back.pose(1), T1, atol=1e-12)
+    np.testing.assert_allclose(back.stations[1].covariance, np.diag(np.arange(1.0, 7.0)))
+    np.testing.assert_allclose(back.stations[1].model.calibration.gibphase, [1.0, 2.0])
+    assert back.stations[0].covariance is None
+
+
+def test_bad_stations(tmp_path):
+    path = _write(tmp_path, "s.toml", "reference = 2\n[lighthouses.0]\nposition = [0, 0, 0]\n"
+                  "quaternion = [1, 0, 0, 0]\n")
+    with pytest.raises(InputError, match="reference station 2"):
+        load_stations(path)
+    path = _write(tmp_path, "s2.toml", "reference = 0\n[lighthouses.0]\nposition = [0, 0, 0]\n"
+                  "quaternion = [2, 0, 0, 0]\n")
+    with pytest.raises(InputError, match="quaternion norm"):
+        load_stations(path)
+
+
+def test_calibration_round_trip(tmp_path):
+    cal = {1: StationCalibration(FactoryCalibration(phase=[0.05, 0.06]), 178605925,
+                                 np.array([0.0, 0.0, 127.0]))}
+    back = load_calibration(save_calibration(cal, tmp_path / "ootx.toml"))
+    assert back[1].id == 178605925
+    np.testing.assert_allclose(back[1].calibration.phase, [0.05, 0.06])
+    np.testing.assert_allclose(back[1].accel_dir, [0, 0, 127])
+
+
+def test_trajectory_round_trip_and_errors(tmp_path):
+    T = se3_exp(np.random.default_rng(2).normal(size=(4, 6)))
+    traj = Trajectory(np.array([0.0, 0.1, 0.2, 0.3]), T)
+    back = load_trajectory(save_trajectory(traj, tmp_path / "t.csv"))
+    np.testing.assert_allclose(back.T_world_board, T, atol=1e-8)
+    bad = _write(tmp_path, "bad.csv", "time,x,y,z,qw,qx,qy,qz\n0.2,0,0,0,1,0,0,0\n"
+                 "0.1,0,0,0,1,0,0,0\n")
+    with pytest.raises(InputError, match="time must increase"):
+        load_trajectory(bad)
+
+
+def test_metrics_known_error():
+    T1 = np.eye(4)
+    T1[:3, 3] = [2.0, 0.0, 0.0]
+    T1_est = T1.copy()
+    T1_est[:3, 3] += [0.001, -0.002, 0.003]
+    T1_est[:3, :3] = so3_exp([0.0, 0.0, np.radians(0.5)])
+    ref = se3_exp([0.3, -0.2, 0.1, 1.0, 2.0, 3.0])  # truth expressed in another world frame
+    truth = Stations(0, {0: Station(ref), 1: Station(ref @ T1)})
+    est = Stations(0, {0: Station(np.eye(4)), 1: Station(T1_est)})
+    (e,) = station_errors(truth, est)
+    np.testing.assert_allclose(e.position_m, [0.001, 0.002, 0.003], atol=1e-12)
+    np.testing.assert_allclose(np.degrees(e.euler_rad), [0, 0, 0.5], atol=1e-9)
+
+
+def test_cli_bad_input_is_one_line_exit_2(tmp_path):
+    bad = _write(tmp_path, "a.csv", HEADER + "0.1,0,0,3,abc\n")
+    board = _write(tmp_path, "b.toml", "[[sensors]]\nid = 3\nposition = [0, 0, 0]\n"
+                   "normal = [0, 0, 1]\n")
+    proc = subprocess.run(
+        [sys.executable, "-m", "lhgraph", "solve", "--board", str(board), "--angles", str(bad),
+         "--output", str(tmp_path / "out.toml")], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "a.csv:2" in lines[0] and "Traceback" not in proc.stderr
+    assert not (tmp_path / "out.toml").exists()

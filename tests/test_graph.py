@@ -1,0 +1,88 @@
+"""Factor-graph solver end to end on simulated captures with known truth."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lhgraph.errors import SolverError
+from lhgraph.graph import GraphOptions, solve_graph
+from lhgraph.metrics import station_errors
+from lhgraph.simulate import load_simulation_config, simulate
+
+CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "simulation"
+
+
+def _capture(name: str, duration_s: float = 3.0, seed: int = 1, **noise):
+    cfg = load_simulation_config(CONFIGS / f"{name}.toml")
+    cfg = dataclasses.replace(cfg, duration_s=duration_s)
+    if noise:
+        cfg = dataclasses.replace(cfg, noise=dataclasses.replace(cfg.noise, **noise))
+    return simulate(cfg, seed)
+
+
+def _models(sim):
+    return {k: s.model for k, s in sim.truth.stations.items()}
+
+
+@pytest.mark.parametrize(("name", "max_mm", "max_deg"), [
+    ("default", 2.0, 0.05),
+    ("ninety", 2.0, 0.05),
+    ("fast", 2.0, 0.05),
+    ("far", 15.0, 0.2),
+])
+def test_recovers_station_pose(name, max_mm, max_deg):
+    sim = _capture(name)
+    result = solve_graph(sim.board, sim.angles, _models(sim))
+    (err,) = station_errors(sim.truth, result.stations)
+    assert err.position_norm_m * 1e3 < max_mm
+    assert np.degrees(err.rotation_rad) < max_deg
+    assert result.residuals.rms_urad() < 120
+    cov = result.stations.stations[1].covariance
+    np.testing.assert_allclose(cov, cov.T, atol=1e-15)
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+    assert len(result.trajectory.time) == len(np.unique(sim.angles.sweep_ids()))
+
+
+def test_board_trajectory_matches_truth():
+    sim = _capture("default")
+    result = solve_graph(sim.board, sim.angles, _models(sim))
+    T_true = sim.trajectory.at(result.trajectory.time)
+    err = np.linalg.norm(result.trajectory.T_world_board[:, :3, 3] - T_true[:, :3, 3], axis=1)
+    assert np.median(err) < 2e-3
+
+
+def test_reflections_are_rejected():
+    clean = _capture("default")
+    dirty = _capture("default", reflection_fraction=0.03)
+    e_clean = station_errors(clean.truth, solve_graph(clean.board, clean.angles).stations)[0]
+    result = solve_graph(dirty.board, dirty.angles)
+    e_dirty = station_errors(dirty.truth, result.stations)[0]
+    assert e_dirty.position_norm_m < max(3 * e_clean.position_norm_m, 2e-3)
+    assert 0.9 < result.residuals.inlier_fraction() < 0.995
+
+
+def test_reference_station_defines_the_world():
+    sim = _capture("default", duration_s=2.0)
+    result = solve_graph(sim.board, sim.angles, options=GraphOptions(reference=1))
+    assert result.stations.reference == 1
+    np.testing.assert_allclose(result.stations.pose(1), np.eye(4))
+    (err,) = station_errors(sim.truth, result.stations)
+    assert err.station == 0 and err.position_norm_m < 3e-3
+
+
+def test_single_station_is_an_error():
+    sim = _capture("default", duration_s=1.0)
+    only0 = sim.angles.select(sim.angles.lighthouse == 0)
+    with pytest.raises(SolverError, match="need at least two"):
+        solve_graph(sim.board, only0)
+
+
+def test_isam2_agrees_with_lm():
+    sim = _capture("default", duration_s=1.0)
+    a = solve_graph(sim.board, sim.angles, options=GraphOptions(solver="lm"))
+    b = solve_graph(sim.board, sim.angles, options=GraphOptions(solver="isam2"))
+    np.testing.assert_allclose(a.stations.pose(1), b.stations.pose(1), atol=2e-5)
