@@ -190,8 +190,8 @@ static void tx_bytes(void *ctx, const uint8_t *data, size_t n)
         if (k == sizeof chunk || i + 1 == n) {
             if (g_opt.baud > 0) {
                 double t = now_s();
-                if (g_wire_time < t) {
-                    g_wire_time = t;
+                if (g_wire_time < t - 0.002) {
+                    g_wire_time = t; /* the wire was idle; small lags (sleep jitter) are caught up */
                 }
                 sleep_s(g_wire_time - t);
                 g_wire_time += (double)k * 10.0 / g_opt.baud;
