@@ -2,8 +2,10 @@
 
 A recording is text, one event per line: ``<host time s> <device> <type> ...``. Used here:
 
-- ``C sensor timecode length`` — a raw light pulse as the device reported it (48 MHz
+- ``C channel timecode length`` — a raw light pulse as the device reported it (48 MHz
   ticks of the device clock, 32-bit wrapping timecode of the rising edge; ``length`` ticks);
+  the channel is the sensor index unless the device's ``CONFIG`` line has a ``channelMap``
+  (sensor index -> channel), which is applied here;
 - ``A sensor acode timecode length_s angle lh`` — libsurvive's own decoded sweep angle
   (rad, ``(t_centre - t_sync - 200000) * 2 pi / 800000`` with ``t_centre`` = timecode +
   length // 2; ``acode & 1`` is the axis).
@@ -73,6 +75,7 @@ def read_libsurvive(path: str | Path, device: str | None = None) -> LibsurviveRe
         raise InputError("file not found" if not path.exists() else "not a file", path)
     c_rows: dict[str, list[list[str]]] = {}
     a_rows: dict[str, list[list[str]]] = {}
+    configs: dict[str, str] = {}
     try:
         with _open_text(path) as f:
             for line in f:
@@ -83,6 +86,8 @@ def read_libsurvive(path: str | Path, device: str | None = None) -> LibsurviveRe
                     c_rows.setdefault(parts[1], []).append(parts[3:6])
                 elif parts[2] == "A" and len(parts) >= 9:
                     a_rows.setdefault(parts[1], []).append(parts[3:9])
+                elif parts[2] == "CONFIG":
+                    configs[parts[1]] = line.split("CONFIG", 1)[1]
     except (OSError, EOFError, UnicodeDecodeError) as exc:
         if not c_rows:
             raise InputError(f"unreadable recording ({exc})", path) from None
@@ -95,7 +100,27 @@ def read_libsurvive(path: str | Path, device: str | None = None) -> LibsurviveRe
     if device not in c_rows:
         raise InputError(f"no raw light ('C') lines for device {device!r} (devices with light "
                          f"data: {found})", path)
-    return _recording(path, device, c_rows[device], a_rows.get(device, []))
+    recording = _recording(path, device, c_rows[device], a_rows.get(device, []))
+    channel_map = _channel_map(configs.get(device, ""))
+    if channel_map is not None:  # C lines carry raw channels; A lines sensor indices
+        lookup = np.full(max(max(channel_map), int(recording.pulses.sensor.max())) + 1, -1)
+        lookup[channel_map] = np.arange(len(channel_map))
+        p = recording.pulses
+        sensor = lookup[p.sensor]
+        keep = sensor >= 0
+        recording.pulses = LightPulses(sensor[keep], p.start[keep], p.end[keep], p.kind[keep])
+    return recording
+
+
+def _channel_map(config_text: str) -> list[int] | None:
+    """The device config's ``channelMap`` (sensor index -> raw channel), if any."""
+    found = re.search(r'"channelMap"\s*:\s*\[([^\]]*)\]', config_text)
+    if not found:
+        return None
+    try:
+        return [int(v) for v in found.group(1).split(",")]
+    except ValueError:
+        return None
 
 
 def _recording(path: Path, device: str, c_rows: list[list[str]], a_rows: list[list[str]]

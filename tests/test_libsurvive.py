@@ -24,8 +24,8 @@ FULL = (Path(__file__).resolve().parents[2] / "shared" / "data" / "libsurvive-lh
 TICK_RAD = 2 * np.pi / 800_000  # one 48 MHz tick of angle
 
 
-def _check_against_libsurvive(path: Path, min_rows: int) -> None:
-    rec = read_libsurvive(path, "HMD")
+def _check_against_libsurvive(path: Path, min_rows: int, device: str = "HMD") -> None:
+    rec = read_libsurvive(path, device)
     result = decode_pulses(rec.pulses, rec.sample_rate_hz, None, DecodeOptions(period="nominal"))
     a = result.angles
     theirs, ours = match_angles(rec, a.time, a.sensor)
@@ -54,8 +54,10 @@ def test_trimmed_fixture_reproduces_libsurvive():
 
 @pytest.mark.slow
 @pytest.mark.skipif(not FULL.exists(), reason="../shared/data not present")
-def test_full_recording_reproduces_libsurvive():
-    _check_against_libsurvive(FULL, 22000)
+@pytest.mark.parametrize("device, rows", [("HMD", 22000), ("T20", 13000)])
+def test_full_recording_reproduces_libsurvive(device, rows):
+    # T20 (a tracker) also exercises the config's channelMap
+    _check_against_libsurvive(FULL, rows, device)
 
 
 def test_fitted_period_is_measured_and_close_to_nominal():
