@@ -254,8 +254,10 @@ class BoardRefused(DeviceError):
 
 def open_serial(port: str, baudrate: int) -> SerialLike:
     """Open ``port`` with pyserial: 8N1, RTS/CTS flow control, exclusive access."""
-    import serial  # pyserial; imported here so that the rest of lhgraph works without it
-
+    try:
+        import serial  # pyserial; imported here so that the rest of lhgraph works without it
+    except ImportError:
+        raise DeviceError("pyserial is not installed (pip install pyserial)") from None
     try:
         return serial.Serial(port=port, baudrate=baudrate, rtscts=True, timeout=0.02,
                              write_timeout=2.0, exclusive=True)
@@ -512,12 +514,17 @@ def _check_output(output: Path, overwrite: bool) -> None:
         raise InputError("exists already (use --force to overwrite)", output)
     if not output.parent.is_dir():
         raise InputError("directory does not exist", output.parent)
+    if not os.access(output.parent, os.W_OK):
+        raise InputError("directory is not writable", output.parent)
 
 
 def _write_atomically(data: bytes, output: Path, overwrite: bool) -> None:
     """Temp file in the target directory, fsync, then rename (no-clobber unless overwrite)."""
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".part",
-                                    dir=output.parent)
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".part",
+                                        dir=output.parent)
+    except OSError as exc:
+        raise InputError(f"cannot write here: {exc.strerror}", output.parent) from None
     tmp = Path(tmp_name)
     try:
         with os.fdopen(fd, "wb") as f:
@@ -537,6 +544,8 @@ def _write_atomically(data: bytes, output: Path, overwrite: bool) -> None:
                     raise InputError("exists already (use --force to overwrite)",
                                      output) from None
                 os.replace(tmp, output)
+    except OSError as exc:
+        raise InputError(f"cannot write: {exc.strerror or exc}", output) from None
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
