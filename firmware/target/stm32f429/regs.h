@@ -105,6 +105,7 @@ typedef struct {
 #define USART_CR1_RE (1u << 2)
 #define USART_CR1_TE (1u << 3)
 #define USART_CR1_RXNEIE (1u << 5)
+#define USART_CR1_TXEIE (1u << 7)
 #define USART_CR1_UE (1u << 13)
 #define USART_CR1_OVER8 (1u << 15)
 #define USART_CR3_RTSE (1u << 8)

@@ -1,14 +1,20 @@
-/* USART1 at 6 Mbaud with RTS/CTS: interrupt-driven receive into a ring buffer, blocking send.
- * 6 Mbaud is exact: 90 MHz / (8 * 1.875), BRR = 1 << 4 | 7 with OVER8. */
+/* USART1 at 6 Mbaud with RTS/CTS, interrupt-driven both ways: received bytes go into a ring
+ * buffer that the main loop drains; bytes to send go into a second ring that the TXE
+ * interrupt empties, so the main loop prepares the next READ answer (CRC, COBS) while the
+ * previous one is on the wire. 6 Mbaud is exact: 90 MHz / (8 * 1.875), BRR = 1 << 4 | 7. */
 #include "board.h"
 #include "hw.h"
 #include "regs.h"
 
 #define RX_SIZE 1024u /* power of two */
+#define TX_SIZE 8192u /* power of two; holds one whole READ answer and the start of the next */
 
 static volatile uint8_t rx_buf[RX_SIZE];
 static volatile uint32_t rx_head; /* written by the interrupt */
 static volatile uint32_t rx_tail; /* written by the main loop */
+static volatile uint8_t tx_buf[TX_SIZE];
+static volatile uint32_t tx_head; /* written by the main loop */
+static volatile uint32_t tx_tail; /* written by the interrupt */
 
 static void pin_af7(uint32_t n)
 {
@@ -51,6 +57,15 @@ void USART1_IRQHandler(void)
             rx_head = next;
         }
     }
+    if ((sr & USART_SR_TXE) != 0u && (USART1->CR1 & USART_CR1_TXEIE) != 0u) {
+        uint32_t t = tx_tail;
+        if (t == tx_head) {
+            USART1->CR1 &= ~USART_CR1_TXEIE; /* nothing left to send */
+        } else {
+            USART1->DR = tx_buf[t];
+            tx_tail = (t + 1u) & (TX_SIZE - 1u);
+        }
+    }
 }
 
 bool uart_rx_pop(uint8_t *b)
@@ -68,8 +83,18 @@ void uart_tx(void *ctx, const uint8_t *data, size_t n)
 {
     (void)ctx;
     for (size_t i = 0; i < n; i++) {
-        while ((USART1->SR & USART_SR_TXE) == 0u) {
+        uint32_t h = tx_head;
+        uint32_t next = (h + 1u) & (TX_SIZE - 1u);
+        while (next == tx_tail) {
+            USART1->CR1 |= USART_CR1_TXEIE; /* full: make sure it drains, then wait */
         }
-        USART1->DR = data[i];
+        tx_buf[h] = data[i];
+        tx_head = next;
+        if ((i & 63u) == 63u) {
+            USART1->CR1 |= USART_CR1_TXEIE; /* start sending before the frame is copied */
+        }
     }
+    uint32_t p = irq_save();
+    USART1->CR1 |= USART_CR1_TXEIE;
+    irq_restore(p);
 }
