@@ -271,5 +271,39 @@ int main(void)
     CHECK_EQ(p[0], LHB_STATE_IDLE);
     CHECK(fake.stops > stops);
     CHECK_EQ(sink.bad, 0);
+
+    /* block sizes at the edges: the image as one block, an exact multiple, 1-byte blocks */
+    {
+        static uint32_t st2[2 * 64];
+        lhb_capture_t c2;
+        lhb_capture_init(&c2, &hw, st2, 64, &t);
+        CHECK_EQ(lhb_capture_arm(&c2, 1, 0, 0, 0), LHB_OK);
+        lhb_capture_poll(&c2, 0);
+        lhb_capture_feed(&c2, samples, 2000);
+        for (int i = 0; i < 4; i++) {
+            lhb_capture_poll(&c2, 0);
+        }
+        CHECK_EQ(c2.state, LHB_STATE_READY);
+        uint32_t size = c2.image_size;
+        CHECK_EQ(size % 4u, 0u);
+        const uint32_t sizes[] = {size, size / 4u, 1u, LHB_BLOCK_SIZE_MAX, 0u, 99999u};
+        for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; k++) {
+            lhb_proto_t p2;
+            sink_init(&sink);
+            lhb_proto_init(&p2, &c2, sizes[k], sink_tx, &sink);
+            uint32_t bs = p2.block_size;
+            CHECK(bs >= 1u && bs <= LHB_BLOCK_SIZE_MAX);
+            send_request(&p2, LHB_CMD_STATUS, 1, NULL, 0, 0);
+            p = last_ok(LHB_CMD_STATUS, 1, LHB_STATUS_LEN);
+            uint32_t count = lhb_get_le32(p + 36);
+            CHECK_EQ(count, (size + bs - 1u) / bs);
+            lhb_put_le32(req, count - 1u);
+            send_request(&p2, LHB_CMD_READ, 2, req, 4, 0);
+            p = last_ok(LHB_CMD_READ, 2, (uint16_t)(4u + size - (count - 1u) * bs));
+            lhb_put_le32(req, count);
+            send_request(&p2, LHB_CMD_READ, 3, req, 4, 0);
+            expect_error(LHB_E_RANGE, LHB_CMD_READ, 3);
+        }
+    }
     return check_result("proto");
 }
