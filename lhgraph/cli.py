@@ -218,6 +218,45 @@ def run_capture(args: argparse.Namespace) -> int:
 COMMANDS.append(("capture", add_capture, run_capture))
 
 
+# --- import ---
+# ``lhgraph import SOURCE ...``: one sub-subcommand per foreign recording format.
+
+
+def _add_import_hive(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("hive", help="hive ROS1 bag (Vive Tracker, OOTX, IMU, OptiTrack)",
+                       description="Convert a hive recording (docs/hive.md) into angles.csv, "
+                       "board.toml, ootx.toml, imu.csv and mocap.csv in the output directory.")
+    p.add_argument("bag", help="hive .bag file (ROS1)")
+    p.add_argument("--output", "-o", required=True, help="directory to write the files into")
+    _add_common_output(p)
+    p.set_defaults(_import=_run_import_hive)
+
+
+def _run_import_hive(args: argparse.Namespace) -> int:
+    from .hive import import_hive
+
+    result = import_hive(args.bag, args.output, overwrite=args.force)
+    if not args.quiet:
+        print(result.summary())
+    return 0
+
+
+def add_import(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("import", help="convert a foreign recording into lhgraph files",
+                       description="Convert a recording made by other software into the "
+                       "contract files (angles, board, factory calibration, ...).")
+    formats = p.add_subparsers(dest="source", required=True, metavar="SOURCE")
+    _add_import_hive(formats)
+    return p
+
+
+def run_import(args: argparse.Namespace) -> int:
+    return int(args._import(args))
+
+
+COMMANDS.append(("import", add_import, run_import))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``lhgraph`` argument parser with every registered command."""
     parser = argparse.ArgumentParser(
