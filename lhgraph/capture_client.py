@@ -235,6 +235,12 @@ class CaptureDownload:
                 f"{self.reconnects} reconnects{extra}")
 
 
+def _is_rejected_request(frame: Frame) -> bool:
+    """An ERROR the board sends for a request it received damaged (seq unknown: 0)."""
+    return (frame.kind == RESP_ERROR and frame.seq == 0 and len(frame.payload) >= 1
+            and frame.payload[0] in TRANSIENT_ERRORS)
+
+
 class _LinkLost(Exception):
     """The port failed (unplugged, closed by the other side)."""
 
@@ -390,6 +396,8 @@ class BoardLink:
                 seq = self.send(kind, payload)
                 deadline = time.monotonic() + self.timeout_s
                 for frame in self.frames(deadline):
+                    if _is_rejected_request(frame):
+                        break  # a request arrived damaged: most likely this one, send again
                     if frame.seq != seq:
                         continue
                     if frame.kind == kind | RESP_FLAG:
@@ -463,6 +471,10 @@ class BoardLink:
                     outstanding[seq] = (block, time.monotonic())
                 deadline = min(t for _, t in outstanding.values()) + timeout
                 for frame in self.frames(deadline):
+                    if _is_rejected_request(frame) and outstanding:
+                        # answers come in order: the damaged request is the oldest open one
+                        requeue(outstanding.popitem(last=False)[1][0])
+                        continue
                     if frame.seq not in outstanding:
                         continue
                     # answers come in request order: earlier requests still open were lost

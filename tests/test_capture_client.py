@@ -200,7 +200,8 @@ def test_cli_byte_identical(virtual_board: Path, capture: tuple[Path, bytes],
     ("--drop-every", "10007"),
     ("--flip-every", "9001"),
     ("--drop-every", "3001", "--flip-every", "2003", "--block-size", "512"),
-], ids=["dropped-bytes", "flipped-bits", "both-small-blocks"])
+    ("--rx-drop-every", "101", "--rx-flip-every", "67", "--block-size", "2048"),
+], ids=["dropped-bytes", "flipped-bits", "both-small-blocks", "damaged-requests"])
 def test_lossy_link_still_byte_identical(virtual_board: Path, capture: tuple[Path, bytes],
                                          tmp_path: Path, faults: tuple[str, ...]) -> None:
     src, data = capture

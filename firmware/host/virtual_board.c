@@ -10,7 +10,8 @@
  * Fault injection (board -> host direction): --drop-every N drops every Nth byte sent,
  * --flip-every N flips one bit of every Nth byte sent, --disconnect-after-blocks N closes the
  * pty after N READ responses and opens a new one (--link keeps a stable path, like a
- * /dev/serial/by-id link; --disconnects K times, each N blocks after the last reconnect), --baud B paces the output at B baud (10 bits per byte). */
+ * /dev/serial/by-id link; --disconnects K times, each N blocks after the last reconnect),
+ * --rx-drop-every / --rx-flip-every do the same to the bytes the board receives, --baud B paces the output at B baud (10 bits per byte). */
 #include <errno.h>
 #include <fcntl.h>
 #include <poll.h>
@@ -40,6 +41,8 @@ typedef struct {
     double time_scale;
     uint64_t drop_every;
     uint64_t flip_every;
+    uint64_t rx_drop_every;
+    uint64_t rx_flip_every;
     uint32_t disconnect_after;
     uint32_t disconnects;
     uint32_t reconnect_delay_ms;
@@ -56,6 +59,7 @@ static volatile sig_atomic_t g_stop = 0;
 static options_t g_opt;
 static pty_t g_pty;
 static uint64_t g_tx_bytes;
+static uint64_t g_rx_bytes;
 static double g_wire_time; /* when the paced wire becomes free (s, monotonic) */
 
 /* source capture (the file) */
@@ -320,6 +324,7 @@ static void usage(void)
     fprintf(stderr,
             "usage: virtual_board --capture FILE.lhcap [--link PATH] [--block-size N]\n"
             "         [--baud B] [--time-scale X] [--drop-every N] [--flip-every N]\n"
+            "         [--rx-drop-every N] [--rx-flip-every N]\n"
             "         [--disconnect-after-blocks N] [--disconnects K] [--reconnect-delay-ms MS]\n"
             "         [--verbose]\n");
     exit(2);
@@ -382,6 +387,10 @@ static void parse_args(int argc, char **argv)
             g_opt.drop_every = parse_uint(a, v, UINT64_MAX);
         } else if (strcmp(a, "--flip-every") == 0) {
             g_opt.flip_every = parse_uint(a, v, UINT64_MAX);
+        } else if (strcmp(a, "--rx-drop-every") == 0) {
+            g_opt.rx_drop_every = parse_uint(a, v, UINT64_MAX);
+        } else if (strcmp(a, "--rx-flip-every") == 0) {
+            g_opt.rx_flip_every = parse_uint(a, v, UINT64_MAX);
         } else if (strcmp(a, "--disconnect-after-blocks") == 0) {
             g_opt.disconnect_after = (uint32_t)parse_uint(a, v, UINT32_MAX);
         } else if (strcmp(a, "--disconnects") == 0) {
@@ -449,7 +458,19 @@ int main(int argc, char **argv)
         if (pr > 0 && (pfd.revents & POLLIN) != 0) {
             ssize_t n = read(g_pty.master, rx, sizeof rx);
             if (n > 0) {
-                lhb_proto_rx(&g_proto, rx, (size_t)n, now_ms());
+                size_t k = 0; /* faults on the host -> board direction */
+                for (ssize_t i = 0; i < n; i++) {
+                    uint8_t b = rx[i];
+                    g_rx_bytes++;
+                    if (g_opt.rx_drop_every != 0 && g_rx_bytes % g_opt.rx_drop_every == 0) {
+                        continue;
+                    }
+                    if (g_opt.rx_flip_every != 0 && g_rx_bytes % g_opt.rx_flip_every == 0) {
+                        b ^= (uint8_t)(1u << ((g_rx_bytes / g_opt.rx_flip_every) % 8u));
+                    }
+                    rx[k++] = b;
+                }
+                lhb_proto_rx(&g_proto, rx, k, now_ms());
             }
         }
         replay_step();
