@@ -73,7 +73,9 @@ int sampler_start(void *ctx, uint32_t n_samples)
     TIM8->CCR1 = 1;
     TIM8->EGR = TIM_EGR_UG; /* load PSC/ARR before the DMA requests are enabled */
     TIM8->SR = 0;
-    TIM8->CNT = 0;
+    /* start past CCR1: the first event is then an update (port I, sample 0) followed by
+     * CC1 (port J, sample 0), keeping the two halves of every word from the same period */
+    TIM8->CNT = 2;
     stream_setup(S_LO, &GPIO(PORT_I)->IDR, buf_lo, 0u);
     stream_setup(S_HI, &GPIO(PORT_J)->IDR, buf_hi, DMA_CR_TCIE | DMA_CR_TEIE | DMA_CR_DMEIE);
     DMA2->S[S_LO].CR |= DMA_CR_EN;
