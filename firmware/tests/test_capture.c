@@ -43,6 +43,9 @@ int main(void)
     CHECK_EQ(lhb_capture_arm(&c, 0, 0, 0, 0), -LHB_E_ARG);
     CHECK_EQ(lhb_capture_arm(&c, 60001, 0, 0, 0), -LHB_E_ARG);
     CHECK_EQ(lhb_capture_arm(&c, 2, 60001, 0, 0), -LHB_E_ARG);
+    CHECK_EQ(lhb_capture_arm(&c, 2, 1, UINT64_MAX - 999u, 0), -LHB_E_ARG);
+    CHECK_EQ(lhb_capture_arm(&c, 2, 1, UINT64_MAX - 1000u, 0), LHB_OK);
+    lhb_capture_abort(&c);
     CHECK_EQ(c.state, LHB_STATE_IDLE);
     /* read before ready */
     uint8_t tmp[8];

@@ -34,8 +34,9 @@ static void hw_stop(lhb_capture_t *c)
 int lhb_capture_arm(lhb_capture_t *c, uint32_t duration_ms, uint32_t delay_ms,
                     uint64_t host_time_us, uint32_t now_ms)
 {
-    if (duration_ms == 0u || duration_ms > LHB_MAX_DURATION_MS || delay_ms > LHB_MAX_DELAY_MS) {
-        return -LHB_E_ARG;
+    if (duration_ms == 0u || duration_ms > LHB_MAX_DURATION_MS || delay_ms > LHB_MAX_DELAY_MS ||
+        host_time_us > UINT64_MAX - (uint64_t)delay_ms * 1000u) {
+        return -LHB_E_ARG; /* (the last: start time = host time + delay must not wrap) */
     }
     if (c->state == LHB_STATE_ARMED || c->state == LHB_STATE_CAPTURING) {
         return -LHB_E_STATE;
