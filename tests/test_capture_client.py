@@ -268,6 +268,29 @@ def test_device_failure_exit_1_and_no_partial_file(virtual_board: Path,
     assert list(tmp_path.iterdir()) == [src] or not list(tmp_path.glob(".*.part"))
 
 
+def test_download_reads_back_with_lhgraph_capture(virtual_board: Path, tmp_path: Path) -> None:
+    """A file written by lhgraph.capture goes through the board and reads back unchanged."""
+    capmod = pytest.importorskip("lhgraph.capture")
+    np = pytest.importorskip("numpy")
+    rnd = np.random.default_rng(7)
+    idx = np.concatenate([[0], np.cumsum(rnd.integers(1, 400, size=1999))])
+    words = np.bitwise_xor.accumulate(
+        np.left_shift(np.uint32(1), rnd.integers(0, 32, size=2000)).astype(np.uint32))
+    capture = capmod.Capture(sample_index=idx, port_word=words,
+                             length_samples=int(idx[-1]) + 5, board_id=42,
+                             firmware_version=0x000100, start_time_us=123)
+    src = capmod.write_capture(capture, tmp_path / "sim.lhcap")
+    out = tmp_path / "back.lhcap"
+    with board(virtual_board, Path(src)) as port:
+        fetch(port, out)
+    assert out.read_bytes() == Path(src).read_bytes()
+    back, warnings = capmod.read_capture(out)
+    assert warnings == []
+    assert np.array_equal(back.sample_index, capture.sample_index)
+    assert np.array_equal(back.port_word, capture.port_word)
+    assert back.length_samples == capture.length_samples and back.board_id == 42
+
+
 def test_bad_arguments_are_input_errors(tmp_path: Path) -> None:
     with pytest.raises(InputError):
         download_capture("/dev/null", tmp_path / "a.lhcap", duration_s=0)
