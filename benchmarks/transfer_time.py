@@ -94,14 +94,17 @@ def build_virtual_board() -> Path:
     return build / "virtual_board"
 
 
-def measure(baud: float, n_records: int) -> dict[str, float]:
-    """Download a synthetic 8 s capture from virtual_board paced at ``baud``."""
+def measure(baud: float, n_records: int, capture: Path | None = None) -> dict[str, float]:
+    """Download a capture (default: a synthetic 8 s one) from virtual_board paced at ``baud``."""
     from lhgraph.capture_client import download_capture
 
     exe = build_virtual_board()
     with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / "src.lhcap"
-        data = synthetic_capture(src, n_records, 16_000_000)
+        if capture is None:
+            src = Path(tmp) / "src.lhcap"
+            data = synthetic_capture(src, n_records, 16_000_000)
+        else:
+            src, data = capture, capture.read_bytes()
         proc = subprocess.Popen([str(exe), "--capture", str(src), "--baud", str(baud),
                                  "--time-scale", "0"], stdout=subprocess.PIPE)
         try:
@@ -126,6 +129,9 @@ def main() -> None:
                     help="size of the edge-record capture (default 1.3 MB)")
     ap.add_argument("--measure", action="store_true",
                     help="also time a paced download from virtual_board")
+    ap.add_argument("--capture", type=Path,
+                    help="also estimate (and with --measure, time) this .lhcap file, e.g. "
+                    "the capture.lhcap of `lhgraph simulate --capture`")
     args = ap.parse_args()
 
     raw = 64 * 1024 * 1024
@@ -137,7 +143,10 @@ def main() -> None:
     print("| capture | payload (bytes) | blocks | wire bytes | efficiency | wire time | "
           "board time not hidden | total |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
-    for name, size in (("8 s edge records", edges), ("8 s raw dump (64 MiB)", raw)):
+    rows = [("8 s edge records", edges), ("8 s raw dump (64 MiB)", raw)]
+    if args.capture is not None:
+        rows.append((f"{args.capture.name} (given)", args.capture.stat().st_size))
+    for name, size in rows:
         e = estimate(size, args.baud)
         print(f"| {name} | {size:,} | {e['blocks']:,} | {e['wire_bytes']:,} | "
               f"{e['efficiency'] * 100:.1f}% | {e['wire_s']:.2f} s | {e['board_s']:.2f} s | "
@@ -150,10 +159,14 @@ def main() -> None:
         n_records = (edges - HEADER_LEN - TRAILER_LEN) // RECORD_LEN
         m = measure(args.baud, n_records)
         print()
-        print(f"measured (virtual_board paced at {args.baud / 1e6:g} Mbaud, pty, Python client): "
-              f"{m['payload']:,} bytes downloaded in {m['download_s']:.2f} s "
-              f"({m['rate_kBps']:.0f} kB/s), {m['total_s']:.2f} s with INFO/ARM/STATUS, "
-              f"byte-identical: {bool(m['identical'])}")
+        runs = [("synthetic 8 s", m)]
+        if args.capture is not None:
+            runs.append((args.capture.name, measure(args.baud, 0, args.capture)))
+        for name, m in runs:
+            print(f"measured, {name} (virtual_board paced at {args.baud / 1e6:g} Mbaud, pty, "
+                  f"Python client): {m['payload']:,} bytes downloaded in "
+                  f"{m['download_s']:.2f} s ({m['rate_kBps']:.0f} kB/s), {m['total_s']:.2f} s "
+                  f"with INFO/ARM/STATUS, byte-identical: {bool(m['identical'])}")
 
 
 if __name__ == "__main__":
