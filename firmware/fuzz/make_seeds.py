@@ -35,7 +35,8 @@ def main(out_dir: str) -> None:
         "info": b"\x00" + frame(1, 1),
         "status": b"\x00" + frame(3, 2),
         "arm": b"\x00" + frame(2, 3, arm) + frame(3, 4),
-        "read_ready": b"\x01" + frame(4, 5, struct.pack("<I", 0)) + frame(4, 6, struct.pack("<I", 3)),
+        "read_ready": (b"\x01" + frame(4, 5, struct.pack("<I", 0))
+                       + frame(4, 6, struct.pack("<I", 3))),
         "capturing": b"\x02" + frame(3, 7) + b"\x5a" + frame(5, 8),
         "abort": b"\x01" + frame(5, 9) + frame(4, 10, struct.pack("<I", 0)),
         "garbage": b"\x00" + bytes(range(1, 60)) + b"\x00" + frame(1, 11),
