@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
-from .fileio import as_int, as_vector, read_toml, write_toml
+from .fileio import as_int, as_vector, read_toml, station_tables, write_toml
 from .model import CALIBRATION_KEYS, FactoryCalibration
 
 
@@ -30,18 +30,8 @@ class StationCalibration:
 def load_calibration(path: str | Path) -> dict[int, StationCalibration]:
     """Read an ``ootx.toml`` -> {station index: StationCalibration}."""
     data = read_toml(path)
-    tables = data.get("lighthouses")
-    if not isinstance(tables, dict) or not tables:
-        raise InputError("expected [lighthouses.<index>] tables", path)
     out: dict[int, StationCalibration] = {}
-    for name, table in tables.items():
-        where = f"lighthouses.{name}"
-        try:
-            index = int(name)
-        except ValueError:
-            raise InputError("station index must be an integer", path, where) from None
-        if not isinstance(table, dict):
-            raise InputError("expected a table", path, where)
+    for index, table, where in station_tables(data, path):
         values = {}
         for key in CALIBRATION_KEYS:
             if key not in table:

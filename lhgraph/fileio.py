@@ -10,7 +10,7 @@ import csv
 import math
 import os
 import tomllib
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -93,6 +93,24 @@ def as_matrix(value: Any, rows: int, cols: int, source: str | Path, where: str) 
     if not isinstance(value, list) or len(value) != rows:
         raise InputError(f"expected a {rows}x{cols} matrix", source, where)
     return np.stack([as_vector(row, cols, source, where) for row in value])
+
+
+def station_tables(
+    data: dict[str, Any], source: str | Path
+) -> Iterator[tuple[int, dict[str, Any], str]]:
+    """``(index, table, where)`` of every ``[lighthouses.<index>]`` table of a TOML document."""
+    tables = data.get("lighthouses")
+    if not isinstance(tables, dict) or not tables:
+        raise InputError("expected [lighthouses.<index>] tables", source)
+    for name, table in tables.items():
+        where = f"lighthouses.{name}"
+        try:
+            index = int(name)
+        except ValueError:
+            raise InputError("station index must be an integer", source, where) from None
+        if not isinstance(table, dict):
+            raise InputError("expected a table", source, where)
+        yield index, table, where
 
 
 def read_csv_columns(

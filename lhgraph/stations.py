@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
-from .fileio import as_int, as_matrix, as_vector, get_key, read_toml, write_toml
+from .fileio import as_int, as_matrix, as_vector, get_key, read_toml, station_tables, write_toml
 from .model import CALIBRATION_KEYS, FactoryCalibration, StationModel
 from .transforms import matrix_to_quat, pose_from_quat
 
@@ -71,18 +71,8 @@ def load_stations(path: str | Path) -> Stations:
     """Read a stations TOML (truth or result)."""
     data = read_toml(path)
     reference = as_int(get_key(data, "reference", path, "top level"), path, "reference")
-    tables = data.get("lighthouses")
-    if not isinstance(tables, dict) or not tables:
-        raise InputError("expected [lighthouses.<index>] tables", path)
     stations: dict[int, Station] = {}
-    for name, table in tables.items():
-        where = f"lighthouses.{name}"
-        try:
-            index = int(name)
-        except ValueError:
-            raise InputError("station index must be an integer", path, where) from None
-        if not isinstance(table, dict):
-            raise InputError("expected a table", path, where)
+    for index, table, where in station_tables(data, path):
         position = as_vector(get_key(table, "position", path, where), 3, path, where + ".position")
         q = as_vector(get_key(table, "quaternion", path, where), 4, path, where + ".quaternion")
         norm = np.linalg.norm(q)
