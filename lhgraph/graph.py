@@ -6,7 +6,8 @@ non-reference station (the reference station is the world frame, so it is no var
 Factors:
 1. one bearing factor per sweep, holding every diode that sweep hit (residual per diode =
    predicted - measured angle of the full station model, Huber loss per diode with the
-   ``Scalar`` reweight scheme), keys ``X(k), V(k)[, L(s)]``;
+   ``Scalar`` reweight scheme), keys ``X(k), V(k), B(k)[, L(s)]``, where ``B(k)`` is the
+   angle offset common to all diodes of sweep k (the sampled sync edge), with a prior;
 2. a white-noise-on-acceleration motion prior between consecutive states.
 Residuals and Jacobians come from :mod:`lhgraph.residuals`, computed for all sweeps in one
 vectorised pass and cached, so each GTSAM callback only slices arrays.
@@ -20,7 +21,7 @@ from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import L, V, X
+from gtsam.symbol_shorthand import B, L, V, X
 from numpy.typing import NDArray
 
 from .angles import Angles
@@ -44,20 +45,26 @@ Progress = Callable[[str], None]
 class GraphOptions:
     """Solver settings (units in the names; defaults suit 2 MHz LH1 captures).
 
-    ``angle_sigma_rad``: per-diode angle noise; ``loss``: per-diode robust loss
+    ``angle_sigma_rad``: per-diode angle noise; ``sweep_offset_sigma_rad``: noise common to all
+    diodes of one sweep (the sampled sync edge); ``loss``: per-diode robust loss
     (``"cauchy"`` or ``"huber"``) and ``huber_k`` its scale in sigmas;
     ``accel_psd_rot``/``accel_psd_pos``: power spectral density of the board's angular
-    (rad^2/s^3) and linear (m^2/s^3) acceleration noise in the motion prior; ``solver``:
+    (rad^2/s^3) and linear (m^2/s^3) acceleration noise in the motion prior (starting values
+    when ``adapt_motion_prior``: then up to ``motion_prior_rounds`` variance-component updates
+    rescale both to the solved motion, LM solver only); ``solver``:
     ``"lm"`` (Levenberg-Marquardt on GTSAM's linear solver) or ``"isam2"``;
     ``max_iterations``; ``reference``: station index of the world frame (default: the
     lowest index present).
     """
 
-    angle_sigma_rad: float = 8e-5
+    angle_sigma_rad: float = 4e-5
+    sweep_offset_sigma_rad: float = 5.5e-5
     huber_k: float = 3.0
     loss: str = "cauchy"
-    accel_psd_rot: float = 200.0
-    accel_psd_pos: float = 20.0
+    accel_psd_rot: float = 10.0
+    accel_psd_pos: float = 1.0
+    adapt_motion_prior: bool = True
+    motion_prior_rounds: int = 5
     solver: str = "lm"
     max_iterations: int = 30
     reference: int | None = None
@@ -201,13 +208,34 @@ class _Evaluator:
 
     def __init__(self, problem: GraphProblem):
         self.p = problem
+        self.error_history: list[float] = []  # graph error per LM iteration (SolveResult)
         K, S = problem.n_states, len(problem.station_ids)
         self.X = np.full((K, 4, 4), np.nan)
         self.V = np.full((K, 6), np.nan)
         self.L = np.repeat(np.eye(4)[None], S, axis=0)
         self.dt = np.diff(problem.state_time)
+        self.B = np.full(K, np.nan)
+        self._ones = np.ones((len(problem.hits.angle), 1))
         self.recomputes = 0
         self._values: gtsam.Values | None = None
+        self.motion_scale = 1.0  # 1/sqrt(s): the motion prior's covariance is s * Q
+
+    def scale_motion_prior(self, factor: float) -> None:
+        """Multiply the motion prior's covariance by ``factor`` (cached residuals go stale)."""
+        self.motion_scale /= np.sqrt(factor)
+        self._values = None
+        self.X = np.full_like(self.X, np.nan)
+
+    def motion_chi2_per_dof(self) -> float:
+        """Mean whitened squared motion-prior residual per degree of freedom under the current
+        prior (1 if its strength matches the solved motion)."""
+        Q = wnoa_covariance(self.dt, self._psd[0], self._psd[1])
+        return float(np.mean(np.einsum("ki,kij,kj->k", self.e, np.linalg.inv(Q), self.e)) / 12)
+
+    def motion_psd(self) -> tuple[float, float]:
+        """Effective (rotational, linear) acceleration PSD of the motion prior now."""
+        s = self.motion_scale ** -2
+        return self._psd[0] * s, self._psd[1] * s
 
     def _read(self, values: gtsam.Values) -> None:
         poses = gtsam.utilities.extractPose3(values)
@@ -219,11 +247,14 @@ class _Evaluator:
         self.L[1:] = T[: S - 1]
         self.X = T[S - 1:]
         self.V = gtsam.utilities.extractVectors(values, "v")
+        self.B = gtsam.utilities.extractVectors(values, "b")[:, 0]
         h = self.p.hits
         self.r, self.HX, self.HV, self.HL = bearing_residuals(h, self.X, self.V, self.L,
                                                               self.p.models)
-        self.e, self.He = motion_residuals(self.X[:-1], self.V[:-1], self.X[1:], self.V[1:],
-                                           self.dt)
+        self.r += self.B[h.state]
+        e, He = motion_residuals(self.X[:-1], self.V[:-1], self.X[1:], self.V[1:], self.dt)
+        self.e = e * self.motion_scale
+        self.He = tuple(H * self.motion_scale for H in He)
         self.recomputes += 1
         self._values = values
 
@@ -234,6 +265,7 @@ class _Evaluator:
             return
         if (np.array_equal(values.atPose3(X(k)).matrix(), self.X[k])
                 and np.array_equal(values.atVector(V(k)), self.V[k])
+                and values.atVector(B(k))[0] == self.B[k]
                 and (slot is None or np.array_equal(values.atPose3(L(slot)).matrix(),
                                                     self.L[slot]))):
             self._values = values
@@ -249,8 +281,9 @@ class _Evaluator:
             if H is not None:
                 H[0] = self.HX[a:b]
                 H[1] = self.HV[a:b]
+                H[2] = self._ones[a:b]
                 if station_var is not None:
-                    H[2] = self.HL[a:b]
+                    H[3] = self.HL[a:b]
             return self.r[a:b]
 
         return error
@@ -271,6 +304,7 @@ def build_graph(problem: GraphProblem, options: GraphOptions
                 ) -> tuple[gtsam.NonlinearFactorGraph, _Evaluator]:
     """The nonlinear factor graph of ``problem`` (named noise models, one factor per sweep)."""
     ev = _Evaluator(problem)
+    ev._psd = (options.accel_psd_rot, options.accel_psd_pos)
     graph = gtsam.NonlinearFactorGraph()
     estimators = {"huber": gtsam.noiseModel.mEstimator.Huber,
                   "cauchy": gtsam.noiseModel.mEstimator.Cauchy}
@@ -283,8 +317,11 @@ def build_graph(problem: GraphProblem, options: GraphOptions
         slot = int(problem.state_station[k])
         diode_noise = gtsam.noiseModel.Isotropic.Sigma(int(b - a), options.angle_sigma_rad)
         robust_noise = gtsam.noiseModel.Robust.Create(huber, diode_noise)
-        keys = [X(k), V(k)] + ([L(slot)] if slot > 0 else [])
+        keys = [X(k), V(k), B(k)] + ([L(slot)] if slot > 0 else [])
         graph.add(gtsam.CustomFactor(robust_noise, keys, ev.bearing(k, slot)))
+    offset_noise = gtsam.noiseModel.Isotropic.Sigma(1, options.sweep_offset_sigma_rad)
+    for k in range(problem.n_states):
+        graph.add(gtsam.PriorFactorVector(B(k), np.zeros(1), offset_noise))
     Q = wnoa_covariance(ev.dt, options.accel_psd_rot, options.accel_psd_pos)
     for k in range(problem.n_states - 1):
         motion_noise = gtsam.noiseModel.Gaussian.Covariance(Q[k])
@@ -301,6 +338,7 @@ def initial_values(init: Initialisation) -> gtsam.Values:
     for k in range(len(init.X)):
         values.insert(X(k), gtsam.Pose3(init.X[k]))
         values.insert(V(k), init.V[k])
+        values.insert(B(k), np.zeros(1))
     return values
 
 
@@ -311,14 +349,15 @@ def _damping(values: gtsam.Values, lam: float) -> gtsam.GaussianFactorGraph:
     """Levenberg-Marquardt damping ``sqrt(lam) I`` on every variable."""
     damp = gtsam.GaussianFactorGraph()
     for key in values.keys():
-        dim = 6
+        dim = 1 if gtsam.Symbol(key).chr() == ord("b") else 6
         damp.add(gtsam.JacobianFactor(key, np.sqrt(lam) * np.eye(dim), np.zeros(dim),
                                       gtsam.noiseModel.Unit.Create(dim)))
     return damp
 
 
 def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
-                         options: GraphOptions, progress: Progress | None
+                         options: GraphOptions, progress: Progress | None,
+                         max_iterations: int | None = None, history: list[float] | None = None
                          ) -> tuple[gtsam.Values, gtsam.GaussianFactorGraph, int, float]:
     """Levenberg-Marquardt driven from Python on GTSAM's sparse linear solver.
 
@@ -326,9 +365,11 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
     instead of 0.5 s for an 8 s capture); linearising a Python-owned ``Values`` does not.
     """
     error = graph.error(values)
+    history = [] if history is None else history
+    history.append(error)
     lam = 0.0
     iterations = 0
-    for iterations in range(1, options.max_iterations + 1):
+    for iterations in range(1, (max_iterations or options.max_iterations) + 1):
         lin = graph.linearize(values)
         while True:
             system = lin if lam == 0.0 else _with(lin, _damping(values, lam))
@@ -343,6 +384,7 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
         if new_error <= error:
             values, error = candidate, new_error
             lam = lam / 10.0 if lam > 1e-6 else 0.0
+        history.append(error)
         if improvement < 1e-6 * max(error, 1.0):
             break
     return values, graph.linearize(values), iterations, error
@@ -377,12 +419,38 @@ def _isam2(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, options: Gra
     return isam.calculateEstimate(), iterations
 
 
+def _adaptive_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ev: _Evaluator,
+                 options: GraphOptions, progress: Progress | None
+                 ) -> tuple[gtsam.Values, gtsam.GaussianFactorGraph, int, float]:
+    """LM solves alternating with a variance-component update of the motion prior's strength:
+    its covariance is scaled until the solved motion's whitened prior residuals have unit
+    variance per degree of freedom (so the prior matches how the board actually moved).
+    Intermediate rounds take at most two LM iterations; the last one runs to convergence."""
+    total = 0
+    rounds = options.motion_prior_rounds if options.adapt_motion_prior else 0
+    for _ in range(rounds):
+        values, _lin, iterations, _error = _levenberg_marquardt(graph, values, options,
+                                                                progress, max_iterations=2,
+                                                                history=ev.error_history)
+        total += iterations
+        ev._read(values)
+        ratio = float(np.clip(ev.motion_chi2_per_dof(), 1e-3, 1e3))
+        if progress:
+            progress(f"motion prior: chi2/dof {ratio:.3g}")
+        if 0.8 < ratio < 1.25:
+            break
+        ev.scale_motion_prior(ratio)
+    values, lin, iterations, error = _levenberg_marquardt(graph, values, options, progress,
+                                                          history=ev.error_history)
+    return values, lin, total + iterations, error
+
+
 def _optimise(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, problem: GraphProblem,
-              options: GraphOptions, progress: Progress | None
+              ev: _Evaluator, options: GraphOptions, progress: Progress | None
               ) -> tuple[gtsam.Values, dict[int, Array], int, float]:
     """Batch solve; returns values, station covariances, iterations and final error."""
     if options.solver == "lm":
-        result, lin, iterations, error = _levenberg_marquardt(graph, values, options, progress)
+        result, lin, iterations, error = _adaptive_lm(graph, values, ev, options, progress)
     elif options.solver == "isam2":
         result, iterations = _isam2(graph, values, options, progress)
         result = gtsam.Values(result)
@@ -422,7 +490,8 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     t1 = time.perf_counter()
     graph, ev = build_graph(problem, options)
     values = initial_values(init)
-    result, cov, iterations, final_error = _optimise(graph, values, problem, options, progress)
+    result, cov, iterations, final_error = _optimise(graph, values, problem, ev, options,
+                                                     progress)
     timings["optimise"] = time.perf_counter() - t1
     ev._read(result)
     warnings = []
@@ -452,4 +521,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         final_error=float(final_error),
         timings_s=timings,
         warnings=warnings,
+        error_history=ev.error_history,
+        diagnostics={"accel_psd_rot": ev.motion_psd()[0], "accel_psd_pos": ev.motion_psd()[1],
+                     "motion_chi2_per_dof": ev.motion_chi2_per_dof()},
     )

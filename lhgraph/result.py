@@ -49,3 +49,8 @@ class SolveResult:
     final_error: float = float("nan")
     timings_s: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    diagnostics: dict[str, float] = field(default_factory=dict)
+    """Method-specific figures, e.g. the graph's adapted motion-prior PSDs."""
+    error_history: list[float] = field(default_factory=list)
+    """Graph error (0.5 * sum of whitened squared residuals) at the initial values and after
+    each optimiser iteration; empty for methods without such a loop."""

@@ -83,6 +83,17 @@ def test_single_station_is_an_error():
 
 def test_isam2_agrees_with_lm():
     sim = _capture("default", duration_s=1.0)
-    a = solve_graph(sim.board, sim.angles, options=GraphOptions(solver="lm"))
+    a = solve_graph(sim.board, sim.angles,
+                    options=GraphOptions(solver="lm", adapt_motion_prior=False))
     b = solve_graph(sim.board, sim.angles, options=GraphOptions(solver="isam2"))
     np.testing.assert_allclose(a.stations.pose(1), b.stations.pose(1), atol=2e-5)
+
+
+def test_motion_prior_adapts_to_the_motion():
+    """The simulated wave is far smoother than the starting prior: the variance-component
+    update must lower the prior's PSD until its whitened residuals have unit variance."""
+    sim = _capture("default")
+    result = solve_graph(sim.board, sim.angles)
+    d = result.diagnostics
+    assert d["accel_psd_pos"] < 0.1 * GraphOptions().accel_psd_pos
+    assert 0.7 < d["motion_chi2_per_dof"] < 1.4
