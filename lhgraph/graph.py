@@ -219,6 +219,7 @@ class _Evaluator:
         self.recomputes = 0
         self._values: gtsam.Values | None = None
         self.motion_scale = 1.0  # 1/sqrt(s): the motion prior's covariance is s * Q
+        self._jacobians_ready = False
 
     def scale_motion_prior(self, factor: float) -> None:
         """Multiply the motion prior's covariance by ``factor`` (cached residuals go stale)."""
@@ -249,14 +250,24 @@ class _Evaluator:
         self.V = gtsam.utilities.extractVectors(values, "v")
         self.B = gtsam.utilities.extractVectors(values, "b")[:, 0]
         h = self.p.hits
-        self.r, self.HX, self.HV, self.HL = bearing_residuals(h, self.X, self.V, self.L,
-                                                              self.p.models)
+        self.r = bearing_residuals(h, self.X, self.V, self.L, self.p.models, False)[0]
         self.r += self.B[h.state]
-        e, He = motion_residuals(self.X[:-1], self.V[:-1], self.X[1:], self.V[1:], self.dt)
-        self.e = e * self.motion_scale
-        self.He = tuple(H * self.motion_scale for H in He)
+        self.e = motion_residuals(self.X[:-1], self.V[:-1], self.X[1:], self.V[1:], self.dt,
+                                  False)[0] * self.motion_scale
+        self._jacobians_ready = False
         self.recomputes += 1
         self._values = values
+
+    def _jacobians(self) -> None:
+        """Jacobians at the cached point, computed once, on the first linearising callback
+        (error-only evaluations never need them)."""
+        if self._jacobians_ready:
+            return
+        _, self.HX, self.HV, self.HL = bearing_residuals(self.p.hits, self.X, self.V, self.L,
+                                                         self.p.models)
+        _, He = motion_residuals(self.X[:-1], self.V[:-1], self.X[1:], self.V[1:], self.dt)
+        self.He = tuple(H * self.motion_scale for H in He)
+        self._jacobians_ready = True
 
     def _ensure(self, values: gtsam.Values, k: int, slot: int | None) -> None:
         # A Python-owned Values reaches every callback as the same object: identity is
@@ -279,6 +290,7 @@ class _Evaluator:
         def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
             self._ensure(values, k, station_var)
             if H is not None:
+                self._jacobians()
                 H[0] = self.HX[a:b]
                 H[1] = self.HV[a:b]
                 H[2] = self._ones[a:b]
@@ -293,6 +305,7 @@ class _Evaluator:
             self._ensure(values, k, None)
             self._ensure(values, k + 1, None)
             if H is not None:
+                self._jacobians()
                 for j in range(4):
                     H[j] = self.He[j][k]
             return self.e[k]
@@ -438,7 +451,9 @@ def _adaptive_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ev: _E
         if progress:
             progress(f"motion prior: chi2/dof {ratio:.3g}")
         if 0.8 < ratio < 1.25:
-            break
+            if iterations < 2:  # the round converged: the prior matches the motion
+                break
+            continue
         ev.scale_motion_prior(ratio)
     values, lin, iterations, error = _levenberg_marquardt(graph, values, options, progress,
                                                           history=ev.error_history)

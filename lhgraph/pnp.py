@@ -38,22 +38,30 @@ class PnPResult:
         return np.isfinite(self.rms_rad)
 
 
-def _board_plane(positions: Array, normals: Array) -> tuple[Array, Array]:
-    """Centroid and basis ``B`` (columns e1, e2, n) of the board's best-fit plane; n faces
-    the same way as the mean sensor normal."""
-    c = positions.mean(axis=0)
-    _, _, Vt = np.linalg.svd(positions - c)
-    B = Vt.T.copy()
-    if B[:, 2] @ normals.mean(axis=0) < 0:
-        B[:, 2] *= -1
-        B[:, 1] *= -1
+def _seen_planes(positions: Array, normals: Array, mask: NDArray[np.bool_]
+                 ) -> tuple[Array, Array]:
+    """Per measurement, centroid ``c`` (M, 3) and basis ``B`` (M, 3, 3) (columns e1, e2, n)
+    of the plane that best fits the *seen* sensors; n faces like their mean normal. On a
+    curved board each station mostly sees one face, so this plane beats the whole board's."""
+    w = mask.astype(float)
+    count = np.maximum(w.sum(axis=1, keepdims=True), 1.0)
+    c = (w @ positions) / count
+    d = positions[None] - c[:, None]
+    cov = np.einsum("ms,msi,msj->mij", w, d, d)
+    _, vecs = np.linalg.eigh(cov)  # ascending: the plane normal is the first column
+    B = vecs[..., ::-1].copy()
+    n_mean = (w @ normals) / count
+    flip = np.sum(B[..., 2] * n_mean, axis=1) < 0
+    B[flip, :, 2] *= -1
+    B[..., 1] = np.cross(B[..., 2], B[..., 0])  # right-handed
     return c, B
 
 
 def _homography_poses(uv: Array, mask: NDArray[np.bool_], plane_xy: Array) -> Array:
-    """Camera-from-plane poses (M, 4, 4) by a DLT homography per measurement."""
+    """Camera-from-plane poses (M, 4, 4) by a DLT homography per measurement; ``plane_xy``
+    (M, S, 2) are the sensors' plane coordinates."""
     scale = np.abs(plane_xy).max()
-    X, Y = plane_xy[:, 0] / scale, plane_xy[:, 1] / scale
+    X, Y = plane_xy[..., 0] / scale, plane_xy[..., 1] / scale
     u, v = np.nan_to_num(uv[..., 0]), np.nan_to_num(uv[..., 1])
     M, S = u.shape
     X, Y = np.broadcast_to(X, (M, S)), np.broadcast_to(Y, (M, S))
@@ -119,33 +127,47 @@ def _refine(
     return T, rms, worst
 
 
+def _facing(T_lh_board: Array, positions: Array, normals: Array,
+            mask: NDArray[np.bool_]) -> Array:
+    """Fraction of the seen sensors (mask (M, S)) whose normal points toward the station."""
+    p = T_lh_board[:, None, :3, :3] @ positions[None, :, :, None]
+    p = p[..., 0] + T_lh_board[:, None, :3, 3]
+    n = (T_lh_board[:, None, :3, :3] @ normals[None, :, :, None])[..., 0]
+    toward = np.sum(n * p, axis=-1) < 0
+    return np.sum(toward & mask, axis=1) / np.maximum(mask.sum(axis=1), 1)
+
+
 def _solve_candidates(
     uv: Array, meas: Array, mask: NDArray[np.bool_], positions: Array, normals: Array,
     model: StationModel, iterations: int, huber_rad: float,
 ) -> tuple[Array, Array, Array]:
     """Homography pose and its planar mirror, both refined; the better one per measurement."""
-    c, B = _board_plane(positions, normals)
-    plane_xy = (positions - c) @ B[:, :2]
+    c, B = _seen_planes(positions, normals, mask)
+    plane_xy = np.einsum("msi,mij->msj", positions[None] - c[:, None], B[..., :2])
     T_cam_plane = _homography_poses(uv, mask, plane_xy)
     # T_lh_board = P^T T_cam_plane [B^T, -B^T c]
-    T_plane_board = make_pose(B.T, -B.T @ c)
+    Bt = np.swapaxes(B, 1, 2)
+    T_plane_board = make_pose(Bt, -(Bt @ c[..., None])[..., 0])
     T_lh_cam = make_pose(_P_CAM_LH.T, np.zeros(3))
     T0 = T_lh_cam @ T_cam_plane @ T_plane_board
     # mirror candidate: reflect the board normal about the line of sight, rotate to match
-    n_lh = T0[:, :3, :3] @ B[:, 2]
+    n_lh = (T0[:, :3, :3] @ B[..., 2, None])[..., 0]
     d = T0[:, :3, 3] / np.linalg.norm(T0[:, :3, 3], axis=1, keepdims=True)
     n_alt = 2 * np.sum(n_lh * d, axis=1, keepdims=True) * d - n_lh
     axis = np.cross(n_lh, n_alt)
     angle = np.arctan2(np.linalg.norm(axis, axis=1), np.sum(n_lh * n_alt, axis=1))
     axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
     R_rot = so3_exp(axis * angle[:, None])
-    c_lh = T0[:, :3, :3] @ c + T0[:, :3, 3]
+    c_lh = (T0[:, :3, :3] @ c[..., None])[..., 0] + T0[:, :3, 3]
     T1 = T0.copy()
     T1[:, :3, :3] = R_rot @ T0[:, :3, :3]
-    T1[:, :3, 3] = c_lh - T1[:, :3, :3] @ c
+    T1[:, :3, 3] = c_lh - (T1[:, :3, :3] @ c[..., None])[..., 0]
     Ta, rms_a, worst_a = _refine(T0, meas, mask, positions, model, iterations, huber_rad)
     Tb, rms_b, worst_b = _refine(T1, meas, mask, positions, model, iterations, huber_rad)
-    better_b = (rms_b < rms_a) | ~np.isfinite(rms_a)
+    # a seen sensor must face the station: that rejects the wrong twin on curved boards
+    face_a = _facing(Ta, positions, normals, mask) > 0.8
+    face_b = _facing(Tb, positions, normals, mask) > 0.8
+    better_b = np.where(face_a == face_b, (rms_b < rms_a) | ~np.isfinite(rms_a), face_b)
     return (np.where(better_b[:, None, None], Tb, Ta), np.where(better_b, rms_b, rms_a),
             np.where(better_b[:, None], worst_b, worst_a))
 

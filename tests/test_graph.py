@@ -33,6 +33,7 @@ def _models(sim):
     ("ninety", 2.0, 0.05),
     ("fast", 2.0, 0.05),
     ("far", 15.0, 0.2),
+    ("facing", 3.0, 0.05),  # stations 160 deg apart, non-planar board
 ])
 def test_recovers_station_pose(name, max_mm, max_deg):
     sim = _capture(name)

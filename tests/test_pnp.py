@@ -1,0 +1,53 @@
+"""Single-station board pose (initialiser): flat and curved boards, outliers, mirror twins."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lhgraph.boards import paper_board, pyramid_board
+from lhgraph.model import ideal_angles
+from lhgraph.pnp import board_poses
+from lhgraph.transforms import se3_exp
+
+
+def _views(board, M=200, seed=0, noise=5e-5, reflections=0.0):
+    rng = np.random.default_rng(seed)
+    T = se3_exp(np.c_[rng.normal(size=(M, 3)) * 0.4, rng.normal(size=(M, 3)) * 0.5])
+    # board +z toward the station (-x of the station frame), 3 m ahead
+    T[:, :3, :3] = np.array([[0, 0, -1], [1, 0, 0], [0, -1, 0]]) @ T[:, :3, :3]
+    T[:, 0, 3] += 3.0
+    p = np.einsum("mij,sj->msi", T[:, :3, :3], board.positions) + T[:, None, :3, 3]
+    n = np.einsum("mij,sj->msi", T[:, :3, :3], board.normals)
+    seen = np.einsum("msi,msi->ms", n, -p / np.linalg.norm(p, axis=-1, keepdims=True)) > 0.26
+    a = ideal_angles(p) + rng.normal(size=p.shape[:2] + (2,)) * noise
+    gross = rng.random(seen.shape) < reflections
+    a[..., 0] += gross * np.radians(rng.uniform(1, 20, seen.shape))
+    return T, np.where(seen, a[..., 0], np.nan), np.where(seen, a[..., 1], np.nan)
+
+
+@pytest.mark.parametrize("board", [paper_board(), pyramid_board()], ids=lambda b: b.name)
+def test_recovers_poses(board):
+    T, az, el = _views(board)
+    r = board_poses(az, el, board.positions, board.normals)
+    err = np.linalg.norm(r.T_lh_board[:, :3, 3] - T[:, :3, 3], axis=1)
+    assert np.mean(r.valid) > 0.95
+    assert np.nanmedian(err) < 3e-3
+    assert np.nanmedian(r.rms_rad) < 1e-4
+
+
+def test_reflections_are_dropped():
+    board = paper_board()
+    T, az, el = _views(board, reflections=0.03, seed=1)
+    r = board_poses(az, el, board.positions, board.normals)
+    err = np.linalg.norm(r.T_lh_board[:, :3, 3] - T[:, :3, 3], axis=1)
+    assert np.nanmedian(err) < 3e-3
+    assert np.nanpercentile(err, 90) < 2e-2
+
+
+def test_too_few_sensors_give_nan():
+    board = paper_board()
+    T, az, el = _views(board, M=3)
+    az[:, 4:] = np.nan
+    r = board_poses(az, el, board.positions, board.normals)
+    assert not np.any(r.valid)
