@@ -83,7 +83,8 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("config", nargs="?", help="solve configuration TOML")
     p.add_argument("--board", help="board TOML")
     p.add_argument("--angles", help="angles CSV")
-    p.add_argument("--output", "-o", help="stations TOML to write")
+    p.add_argument("--output", "-o", help="stations TOML to write (with a CONFIG: a path "
+                   "without .toml or an existing directory = a run directory, docs/workflow.md)")
     p.add_argument("--method", choices=("graph", "paper"), help="default: graph")
     p.add_argument("--trajectory", help="also write the board trajectory CSV")
     p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
@@ -99,6 +100,7 @@ def run_solve(args: argparse.Namespace) -> int:
     from .errors import InputError
     from .metrics import station_errors
     from .report import print_solution
+    from .rundir import comparison_rows, format_comparison, is_run_directory, run_to_directory
     from .solve import SolveConfig, load_solve_config, run_config, write_solution
     from .stations import load_stations
 
@@ -116,11 +118,25 @@ def run_solve(args: argparse.Namespace) -> int:
             setattr(config, key, Path(value) if key not in ("method", "reference") else value)
     if config.output is None:
         raise InputError("no output: give --output or set 'output' in the config")
+    progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
+    if args.method is not None:
+        config.methods = None
+    if args.config and is_run_directory(config.output):
+        run = run_to_directory(config, config.output, args.force, progress)
+        if not args.quiet:
+            for r in run.runs:
+                print_solution(r.result, r.errors)
+            if len(run.runs) > 1:
+                print(format_comparison(comparison_rows(run.runs)))
+            print(f"wrote {len(run.files)} files to {run.directory}; report: {run.report}")
+        return 0
+    if len(config.method_list()) > 1:
+        raise InputError("several methods need a run directory output (a path without "
+                         ".toml)", config.output)
     for target in (config.output, config.trajectory):
         if target is not None and Path(target).exists() and not args.force:
             raise InputError("exists already (use --force to overwrite)", target)
     truth = load_stations(config.truth) if config.truth else None
-    progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
     result = run_config(config, progress)
     written = write_solution(result, config.output, config.trajectory, overwrite=args.force)
     errors = station_errors(truth, result.stations) if truth else None
@@ -255,6 +271,74 @@ def run_import(args: argparse.Namespace) -> int:
 
 
 COMMANDS.append(("import", add_import, run_import))
+
+
+# --- study ---
+
+
+def add_study(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("study", help="run a simulation protocol with several methods",
+                       description="Simulate every capture of a study's protocol, solve it with "
+                       "each method (resumable: results kept in DIR/results/) and write the "
+                       "Table III comparison and plots (docs/workflow.md).")
+    p.add_argument("config", help="study TOML (e.g. configs/study_small.toml)")
+    p.add_argument("--output", "-o", required=True, help="study directory")
+    p.add_argument("--jobs", "-j", type=int, default=1, help="parallel processes (default 1)")
+    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of "
+                   "local processes (needs lhgraph[dask])")
+    p.add_argument("--force", action="store_true",
+                   help="rerun every capture even when its result is stored")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    return p
+
+
+def run_study(args: argparse.Namespace) -> int:
+    from .study import load_study_config
+    from .study import run_study as study
+
+    progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
+    result = study(load_study_config(args.config), args.output, args.jobs, args.scheduler,
+                   rerun=args.force, progress=progress)
+    if not args.quiet:
+        print(next(f for f in result.files if f.name == "study.md").read_text())
+        print(f"ran {result.ran}, reused {result.skipped}; wrote "
+              f"{', '.join(str(f) for f in result.files)}")
+    return 0
+
+
+COMMANDS.append(("study", add_study, run_study))
+
+
+# --- view ---
+
+
+def add_view(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("view", help="3-D view of a run directory (Open3D)",
+                       description="Show a run directory's stations (with sweep frusta), board "
+                       "path and diodes in an Open3D window, or --export the scene without a "
+                       "display (docs/workflow.md).")
+    p.add_argument("run_dir", help="run directory (or one method's subdirectory)")
+    p.add_argument("--export", help="write FILE.png, .ply, .glb, .gltf or .obj instead")
+    p.add_argument("--renderer", choices=("auto", "open3d", "matplotlib"), default="auto",
+                   help="PNG renderer (default: Open3D offscreen, else matplotlib)")
+    _add_common_output(p)
+    return p
+
+
+def run_view(args: argparse.Namespace) -> int:
+    from .viewer import build_scene, export, show
+
+    scene = build_scene(args.run_dir)
+    if args.export:
+        path, how = export(scene, args.export, args.force, args.renderer)
+        if not args.quiet:
+            print(f"wrote {path} ({how})")
+    else:
+        show(scene)
+    return 0
+
+
+COMMANDS.append(("view", add_view, run_view))
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -10,11 +10,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .angles import Angles, load_angles
 from .board import Board, load_board
-from .calibration import load_calibration
+from .calibration import StationCalibration, load_calibration
 from .errors import InputError
 from .fileio import as_float, as_int, read_toml
 from .graph import GraphOptions, solve_graph
@@ -22,6 +22,9 @@ from .model import Convention, StationModel
 from .result import SolveResult
 from .stations import save_stations
 from .trajectory import save_trajectory
+
+if TYPE_CHECKING:
+    from .baseline import PaperOptions
 
 METHODS = ("graph", "paper")
 
@@ -31,15 +34,22 @@ def station_models(calibration_path: str | Path | None,
     """Station models from an ``ootx.toml`` (empty: ideal stations)."""
     if calibration_path is None:
         return {}
+    return models_of(load_calibration(calibration_path), convention)
+
+
+def models_of(calibrations: dict[int, StationCalibration],
+              convention: Convention | None = None) -> dict[int, StationModel]:
+    """Station models (by index) from decoded or loaded factory calibrations."""
     convention = convention or Convention()
     return {k: StationModel(c.calibration, convention=convention)
-            for k, c in load_calibration(calibration_path).items()}
+            for k, c in calibrations.items()}
 
 
 def solve(board: Board, angles: Angles, method: str = "graph",
           models: dict[int, StationModel] | None = None, reference: int | None = None,
           graph_options: GraphOptions | None = None,
-          progress: Callable[[str], None] | None = None) -> SolveResult:
+          progress: Callable[[str], None] | None = None,
+          paper_options: PaperOptions | None = None) -> SolveResult:
     """Calibrate the stations seen in ``angles`` with ``method`` ("graph" or "paper")."""
     angles.check_board(board)
     if method == "graph":
@@ -50,7 +60,9 @@ def solve(board: Board, angles: Angles, method: str = "graph",
     if method == "paper":
         from .baseline import solve_paper
 
-        return solve_paper(board, angles, models, reference, progress=progress)
+        staged = None if progress is None else (
+            lambda stage, done, total: progress(f"{stage}: {done}/{total}"))
+        return solve_paper(board, angles, models, reference, paper_options, staged)
     raise InputError(f"unknown method '{method}' (expected one of {', '.join(METHODS)})",
                      where="--method")
 
@@ -66,10 +78,16 @@ def write_solution(result: SolveResult, output: str | Path, trajectory: str | Pa
 
 @dataclass
 class SolveConfig:
-    """A solve described by a file: inputs, method and options (paths absolute)."""
+    """A solve described by a file: inputs, method(s) and options (paths absolute).
+
+    The angles come from ``angles`` or, when ``capture`` is set instead, from decoding that
+    capture (its OOTX calibration is used unless ``calibration`` is given). ``methods``
+    (several methods, run directory output only) overrides ``method``; ``seed`` is recorded
+    in a run directory's summary; ``path`` is the configuration file itself.
+    """
 
     board: Path
-    angles: Path
+    angles: Path | None
     output: Path | None = None
     method: str = "graph"
     calibration: Path | None = None
@@ -77,6 +95,50 @@ class SolveConfig:
     truth: Path | None = None
     reference: int | None = None
     graph: GraphOptions = field(default_factory=GraphOptions)
+    capture: Path | None = None
+    methods: list[str] | None = None
+    seed: int | None = None
+    path: Path | None = None
+
+    def method_list(self) -> list[str]:
+        """The methods to run, in order."""
+        return list(self.methods) if self.methods else [self.method]
+
+
+@dataclass
+class SolveInputs:
+    """What a config's files hold: board, angles, station models, decoder report lines."""
+
+    board: Board
+    angles: Angles
+    models: dict[int, StationModel]
+    notes: list[str] = field(default_factory=list)
+
+
+def parse_graph_options(table: Any, path: str | Path, where: str = "graph") -> GraphOptions:
+    """GraphOptions from a config's ``[graph]`` table (unknown or mistyped keys: InputError)."""
+    graph = GraphOptions()
+    if not isinstance(table, dict):
+        raise InputError("expected a table", path, where)
+    names = {f.name: f.type for f in fields(GraphOptions)}
+    for key, value in table.items():
+        at = f"{where}.{key}"
+        if key not in names:
+            raise InputError(f"unknown option (known: {', '.join(sorted(names))})", path, at)
+        choices = {"solver": ("lm", "isam2"), "loss": ("cauchy", "huber")}
+        default = getattr(graph, key)
+        if key in choices:
+            if value not in choices[key]:
+                raise InputError(f"expected one of {', '.join(choices[key])}", path, at)
+        elif isinstance(default, bool):
+            if not isinstance(value, bool):
+                raise InputError(f"expected true or false, got {value!r}", path, at)
+        elif key == "reference" or isinstance(default, int):
+            value = as_int(value, path, at)
+        else:
+            value = as_float(value, path, at)
+        setattr(graph, key, value)
+    return graph
 
 
 def load_solve_config(path: str | Path) -> SolveConfig:
@@ -85,7 +147,7 @@ def load_solve_config(path: str | Path) -> SolveConfig:
     data = read_toml(path)
     base = path.parent
     known = {"board", "angles", "output", "method", "calibration", "trajectory", "truth",
-             "reference", "graph"}
+             "reference", "graph", "capture", "methods", "seed"}
     for key in data:
         if key not in known:
             raise InputError(f"unknown key '{key}' (known: {', '.join(sorted(known))})", path,
@@ -104,38 +166,54 @@ def load_solve_config(path: str | Path) -> SolveConfig:
     if method not in METHODS:
         raise InputError(f"unknown method '{method}' (expected one of {', '.join(METHODS)})",
                          path, "method")
-    graph = GraphOptions()
-    table: dict[str, Any] = data.get("graph", {})
-    if not isinstance(table, dict):
-        raise InputError("expected a table", path, "graph")
-    names = {f.name: f.type for f in fields(GraphOptions)}
-    for key, value in table.items():
-        where = f"graph.{key}"
-        if key not in names:
-            raise InputError(f"unknown option (known: {', '.join(sorted(names))})", path, where)
-        choices = {"solver": ("lm", "isam2"), "loss": ("cauchy", "huber")}
-        if key in choices:
-            if value not in choices[key]:
-                raise InputError(f"expected one of {', '.join(choices[key])}", path, where)
-        elif key in ("max_iterations", "reference"):
-            value = as_int(value, path, where)
-        else:
-            value = as_float(value, path, where)
-        setattr(graph, key, value)
+    methods = data.get("methods")
+    if methods is not None:
+        if "method" in data:
+            raise InputError("give 'method' or 'methods', not both", path, "methods")
+        if (not isinstance(methods, list) or not methods
+                or any(m not in METHODS for m in methods) or len(set(methods)) != len(methods)):
+            raise InputError(f"expected a non-empty list of distinct methods from "
+                             f"{', '.join(METHODS)}, got {methods!r}", path, "methods")
+    if ("angles" in data) == ("capture" in data):
+        raise InputError("give exactly one of 'angles' and 'capture'", path,
+                         "angles" if "angles" in data else "capture")
+    graph = parse_graph_options(data.get("graph", {}), path)
     reference = as_int(data["reference"], path, "reference") if "reference" in data else None
+    seed = as_int(data["seed"], path, "seed") if "seed" in data else None
     return SolveConfig(
-        board=a_path("board", True), angles=a_path("angles", True), output=a_path("output"),
+        board=a_path("board", True), angles=a_path("angles"), output=a_path("output"),
         method=method, calibration=a_path("calibration"), trajectory=a_path("trajectory"),
-        truth=a_path("truth"), reference=reference, graph=graph,
+        truth=a_path("truth"), reference=reference, graph=graph, capture=a_path("capture"),
+        methods=methods, seed=seed, path=path,
     )
+
+
+def load_inputs(config: SolveConfig) -> SolveInputs:
+    """Read the board, the angles (or decode the capture) and the station models."""
+    board = load_board(config.board)
+    notes: list[str] = []
+    models = station_models(config.calibration)
+    if config.capture is not None:
+        from .decode import decode_file
+
+        decoded, warnings = decode_file(config.capture, board=board)
+        angles = decoded.angles
+        notes = [*warnings, *decoded.report.lines()]
+        if config.calibration is None:
+            models = models_of(decoded.calibrations)
+        source: Path = config.capture
+    elif config.angles is not None:
+        angles = load_angles(config.angles)
+        source = config.angles
+    else:
+        raise InputError("no angles: give 'angles' or 'capture'", config.path, "angles")
+    angles.check_board(board, source)
+    return SolveInputs(board, angles, models, notes)
 
 
 def run_config(config: SolveConfig, progress: Callable[[str], None] | None = None
                ) -> SolveResult:
-    """Load the inputs a config names and solve."""
-    board = load_board(config.board)
-    angles = load_angles(config.angles)
-    angles.check_board(board, config.angles)
-    models = station_models(config.calibration)
-    return solve(board, angles, config.method, models, config.reference, config.graph,
-                 progress)
+    """Load the inputs a config names and solve with its (first) method."""
+    inputs = load_inputs(config)
+    return solve(inputs.board, inputs.angles, config.method_list()[0], inputs.models,
+                 config.reference, config.graph, progress)
