@@ -89,9 +89,13 @@ class GraphProblem:
 
 
 def build_problem(board: Board, angles: Angles, models: dict[int, StationModel],
-                  reference: int) -> GraphProblem:
-    """Group hits into sweeps (one board state each) and order everything for the graph."""
-    station_ids = [reference] + [s for s in angles.stations() if s != reference]
+                  reference: int, station_ids: list[int] | None = None) -> GraphProblem:
+    """Group hits into sweeps (one board state each) and order everything for the graph.
+
+    ``station_ids`` fixes the station slots (slot 0 = reference); by default the stations
+    present in ``angles``."""
+    if station_ids is None:
+        station_ids = [reference] + [s for s in angles.stations() if s != reference]
     slot_of = {s: i for i, s in enumerate(station_ids)}
     sensor_rows = angles.check_board(board)
     sweep = angles.sweep_ids()
