@@ -22,10 +22,13 @@ from numpy.typing import NDArray
 from .angles import Angles, save_angles
 from .board import Board, make_board, save_board
 from .calibration import StationCalibration, save_calibration
-from .errors import InputError
+from .errors import InputError, SolverError
 from .fileio import check_writable, write_csv_columns
+from .kabsch import weighted_kabsch
 from .model import FactoryCalibration, StationModel, predict
-from .transforms import make_pose, se3_exp
+from .pnp import PnPResult
+from .trajectory import Trajectory
+from .transforms import interpolate_poses, make_pose, se3_exp, so3_log
 
 Array = NDArray[np.float64]
 
@@ -420,11 +423,47 @@ def single_station_pnp(positions: Array, normals: Array, axis: NDArray, angle: A
         lam = np.where(better, lam * 0.3, lam * 10.0)
     cost = np.where(T[:, 0, 3] > 0, cost, np.inf)
     best = int(np.argmin(cost))
-    Tb = T[best]
-    p_lh = positions @ Tb[:3, :3].T + Tb[:3, 3]
-    n_lh = normals @ Tb[:3, :3].T
-    facing = float(np.mean(np.sum(n_lh * -p_lh, axis=1) > 0))
-    return Tb, float(np.sqrt(cost[best] / n)), facing
+    facing = float(facing_fraction(T[best][None], positions, normals)[0])
+    return T[best], float(np.sqrt(cost[best] / n)), facing
+
+
+def facing_fraction(T_lh_board: Array, positions: Array, normals: Array,
+                    seen: NDArray[np.bool_] | None = None) -> Array:
+    """Fraction of sensors whose normal points toward the station, per pose ``(M, 4, 4)``.
+
+    ``positions``/``normals`` (S, 3) in the board frame; ``seen`` (M, S) restricts each pose
+    to the sensors it was fitted on (default: all). A photodiode only sees a station in front
+    of it, so a correct pose has every seen sensor facing (1.0); a mirror solution ~0.
+    """
+    R, t = T_lh_board[:, :3, :3], T_lh_board[:, :3, 3]
+    p = np.einsum("mij,sj->msi", R, positions) + t[:, None]
+    n = np.einsum("mij,sj->msi", R, normals)
+    facing = np.sum(n * -p, axis=2) > 0
+    seen = np.ones(facing.shape, dtype=bool) if seen is None else seen
+    return np.sum(facing & seen, axis=1) / np.maximum(seen.sum(axis=1), 1)
+
+
+def tracker_board_poses(azimuth: Array, elevation: Array, positions: Array, normals: Array,
+                        model: StationModel | None = None, min_sensors: int = 5,
+                        n_starts: int = 8) -> PnPResult:
+    """Drop-in for :func:`lhgraph.pnp.board_poses` that suits curved boards (Vive Tracker):
+    :func:`single_station_pnp` on each measurement's sensors seen on both axes.
+
+    ``azimuth``/``elevation`` (M, S) rad (NaN = not seen) over the board's sensors
+    ``positions``/``normals`` (S, 3); measurements with fewer than ``min_sensors`` get NaN.
+    One pose at a time (~15 ms each): slower than the vectorised planar PnP.
+    """
+    mask = np.isfinite(azimuth) & np.isfinite(elevation)
+    n = mask.sum(axis=1)
+    M = len(azimuth)
+    T, rms = np.full((M, 4, 4), np.nan), np.full(M, np.nan)
+    for m in np.flatnonzero(n >= min_sensors):
+        k = np.flatnonzero(mask[m])
+        angle = np.stack([azimuth[m, k], elevation[m, k]], axis=1).ravel()
+        T[m], rms[m], _ = single_station_pnp(
+            np.repeat(positions[k], 2, axis=0), np.repeat(normals[k], 2, axis=0),
+            np.tile([0, 1], len(k)), angle, model, n_starts)
+    return PnPResult(T, rms, n)
 
 
 def fit_sweep_pairs(bag: HiveBag, pairs: list[tuple[int, int]], mapping: AxisMapping,
@@ -486,3 +525,82 @@ def check_mappings(bag: HiveBag, n_pairs: int = 40, min_hits: int = 12, seed: in
                                 float(np.median(np.linalg.norm(f.T_lh_board[ok, :3, 3],
                                                                axis=1)))))
     return out
+
+
+# --- comparison with the OptiTrack ground truth -----------------------------------------------
+
+
+@dataclass
+class MocapAlignment:
+    """A board path aligned to OptiTrack: ``T_world_opti`` (world alignment), ``T_body_board``
+    (hand-eye: marker body -> board frame), ``time_offset_s`` (mocap time = path time +
+    offset), and per compared pose the position error (m) and rotation error (rad)."""
+
+    T_world_opti: Array
+    T_body_board: Array
+    time_offset_s: float
+    time: Array
+    position_error_m: Array
+    rotation_error_rad: Array
+
+    def rmse_mm(self) -> float:
+        """Root-mean-square position error (mm)."""
+        return float(np.sqrt(np.mean(self.position_error_m**2)) * 1e3)
+
+    def rmse_deg(self) -> float:
+        """Root-mean-square rotation error (deg)."""
+        return float(np.degrees(np.sqrt(np.mean(self.rotation_error_rad**2))))
+
+
+def align_to_mocap(path: Trajectory, mocap: Trajectory, max_gap_s: float = 0.05,
+                   max_offset_s: float = 0.1, rotation_scale_m: float = 0.1,
+                   robust_scale_m: float = 0.005) -> MocapAlignment:
+    """Fit ``T_world_board(t) ~ T_world_opti T_opti_body(t + dt) T_body_board`` by nonlinear
+    least squares (scipy, soft-L1 loss of scale ``robust_scale_m``) over the 13 unknowns.
+
+    ``path``: estimated board poses (world = reference station); ``mocap``: marker-body poses
+    ``T_opti_body`` (its ``T_world_board`` field), interpolated (:func:`interpolate_poses`) at
+    the path times + ``dt`` (|dt| <= ``max_offset_s``); path times without mocap samples within
+    ``max_gap_s`` on both sides are skipped. Residual per pose: position error (m) and
+    rotation error (rad) times ``rotation_scale_m``. Start: Kabsch on positions, chordal mean
+    of the body-to-board rotations, zero lever arm and offset.
+    """
+    from scipy.optimize import least_squares
+
+    t_m, T_m = mocap.time, mocap.T_world_board
+    i = np.searchsorted(t_m, path.time)
+    ok = (i > 0) & (i < len(t_m))
+    ic = np.clip(i, 1, len(t_m) - 1)
+    ok &= (path.time - t_m[ic - 1] < max_gap_s) & (t_m[ic] - path.time < max_gap_s)
+    ok &= (path.time > t_m[0] + max_offset_s) & (path.time < t_m[-1] - max_offset_s)
+    ok &= np.all(np.isfinite(path.T_world_board.reshape(len(path.time), -1)), axis=1)
+    t, T_est = path.time[ok], path.T_world_board[ok]
+    if len(t) < 10:
+        raise SolverError(f"only {len(t)} path poses overlap the mocap recording")
+    T_body = interpolate_poses(t_m, T_m, t)
+    W0 = weighted_kabsch(T_body[:, :3, 3], T_est[:, :3, 3])
+    U, _, Vt = np.linalg.svd(np.sum(np.swapaxes(W0[:3, :3] @ T_body[:, :3, :3], 1, 2)
+                                    @ T_est[:, :3, :3], axis=0))
+    H0 = make_pose(U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt, np.zeros(3))
+
+    def unpack(x: Array) -> tuple[Array, Array, float]:
+        return se3_exp(x[:6]) @ W0, H0 @ se3_exp(x[6:12]), float(x[12])
+
+    def errors(x: Array) -> tuple[Array, Array]:
+        W, H, dt = unpack(x)
+        T_pred = W @ interpolate_poses(t_m, T_m, t + dt) @ H
+        e_pos = T_pred[:, :3, 3] - T_est[:, :3, 3]
+        e_rot = so3_log(np.swapaxes(T_est[:, :3, :3], 1, 2) @ T_pred[:, :3, :3])
+        return e_pos, e_rot
+
+    def residuals(x: Array) -> Array:
+        e_pos, e_rot = errors(x)
+        return np.concatenate([e_pos, rotation_scale_m * e_rot], axis=1).ravel()
+
+    lim = np.r_[np.full(12, np.inf), max_offset_s]
+    fit = least_squares(residuals, np.zeros(13), bounds=(-lim, lim), loss="soft_l1",
+                        f_scale=robust_scale_m, x_scale=np.r_[np.full(12, 0.01), 0.01])
+    W, H, dt = unpack(fit.x)
+    e_pos, e_rot = errors(fit.x)
+    return MocapAlignment(W, H, dt, t, np.linalg.norm(e_pos, axis=1),
+                          np.linalg.norm(e_rot, axis=1))
