@@ -98,3 +98,22 @@ def test_motion_prior_adapts_to_the_motion():
     d = result.diagnostics
     assert d["accel_psd_pos"] < 0.1 * GraphOptions().accel_psd_pos
     assert 0.7 < d["motion_chi2_per_dof"] < 1.4
+
+
+def test_three_and_four_stations(tmp_path):
+    """Two to four stations without code changes (LH2 brings more)."""
+    stations = "".join(
+        f"[[stations]]\nposition = [{x}, -1.0, 2.0]\n"
+        "quaternion = [0.7071067811865476, 0.0, 0.0, 0.7071067811865476]\n"
+        for x in (0.0, 1.5, -1.5, 0.8))
+    path = tmp_path / "four.toml"
+    path.write_text(f"duration_s = 3.0\nseed = 5\n{stations}[motion]\ncentre_m = [0.0, 1.5, 1.6]\n")
+    sim = simulate(load_simulation_config(path))
+    result = solve_graph(sim.board, sim.angles)
+    errors = station_errors(sim.truth, result.stations)
+    assert [e.station for e in errors] == [1, 2, 3]
+    for e in errors:
+        assert e.position_norm_m < 3e-3 and np.degrees(e.rotation_rad) < 0.1
+    three = sim.angles.select(sim.angles.lighthouse != 3)
+    result3 = solve_graph(sim.board, three)
+    assert sorted(result3.stations.indices()) == [0, 1, 2]
