@@ -51,7 +51,8 @@ class GraphOptions:
     ``accel_psd_rot``/``accel_psd_pos``: power spectral density of the board's angular
     (rad^2/s^3) and linear (m^2/s^3) acceleration noise in the motion prior (starting values
     when ``adapt_motion_prior``: then up to ``motion_prior_rounds`` variance-component updates
-    rescale both to the solved motion, LM solver only); ``solver``:
+    rescale both to the solved motion, LM solver only, never above ``max_psd_factor`` times the
+    start); ``solver``:
     ``"lm"`` (Levenberg-Marquardt on GTSAM's linear solver) or ``"isam2"``;
     ``max_iterations``; ``reference``: station index of the world frame (default: the
     lowest index present).
@@ -64,6 +65,7 @@ class GraphOptions:
     accel_psd_rot: float = 10.0
     accel_psd_pos: float = 1.0
     adapt_motion_prior: bool = True
+    max_psd_factor: float = 10.0
     motion_prior_rounds: int = 5
     solver: str = "lm"
     max_iterations: int = 30
@@ -150,8 +152,24 @@ def _station_paths(board: Board, angles: Angles, problem: GraphProblem
         pnp = board_poses(meas.azimuth, meas.elevation, board.positions, board.normals,
                           problem.models[slot])
         ok = pnp.valid
+        ok[ok] = _consistent_path(meas.time[ok], pnp.T_lh_board[ok])
         paths.append((meas.time[ok], pnp.T_lh_board[ok], pnp.rms_rad[ok]))
     return paths
+
+
+def _consistent_path(t: Array, T: Array, window: int = 7, max_jump_m: float = 0.15
+                     ) -> NDArray[np.bool_]:
+    """Poses within ``max_jump_m`` of the running median position of their ``window``
+    neighbours (a board moves < 2 m/s; a wrong PnP twin or a fit to a handful of reflected
+    hits lands far away)."""
+    if len(t) < window:
+        return np.ones(len(t), dtype=bool)
+    p = T[:, :3, 3]
+    half = window // 2
+    padded = np.pad(p, ((half, half), (0, 0)), mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, window, axis=0)
+    median = np.median(windows, axis=-1)
+    return np.linalg.norm(p - median, axis=1) < max_jump_m
 
 
 def _match_times(t_query: Array, t_ref: Array, max_gap_s: float) -> NDArray[np.bool_]:
@@ -185,9 +203,14 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
                 f"reference station within {max_gap_s * 1e3:.0f} ms ({ok.sum()} matches); "
                 "use a non-planar board or wave it so both stations see it")
         T_ref_at = interpolate_poses(t_ref, T_ref, t_s[ok])
-        src = transform_points(T_s[ok][:, None], board.positions[None])   # station s frame
-        dst = transform_points(T_ref_at[:, None], board.positions[None])  # reference frame
-        w = np.repeat(1.0 / (rms_s[ok] ** 2 + 1e-10), len(board.positions))
+        # each matched pair proposes T_ref_s; keep those near the median proposal
+        proposals = T_ref_at @ inverse(T_s[ok])
+        centre = np.median(proposals[:, :3, 3], axis=0)
+        agree = np.linalg.norm(proposals[:, :3, 3] - centre, axis=1)
+        agree = agree <= max(3 * np.median(agree), 0.02)
+        src = transform_points(T_s[ok][agree][:, None], board.positions[None])  # station s
+        dst = transform_points(T_ref_at[agree][:, None], board.positions[None])  # reference
+        w = np.repeat(1.0 / (rms_s[ok][agree] ** 2 + 1e-10), len(board.positions))
         L0[slot] = weighted_kabsch(src.reshape(-1, 3), dst.reshape(-1, 3), w)
     # board path in the world from every station, merged by time
     times = np.concatenate([p[0] for p in paths])
@@ -452,6 +475,8 @@ def _adaptive_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ev: _E
         total += iterations
         ev._read(values)
         ratio = float(np.clip(ev.motion_chi2_per_dof(), 1e-3, 1e3))
+        # a model misfit shows up as board jitter: never loosen the prior beyond the cap
+        ratio = min(ratio, options.max_psd_factor / ev.motion_scale**-2)
         if progress:
             progress(f"motion prior: chi2/dof {ratio:.3g}")
         if 0.8 < ratio < 1.25:
