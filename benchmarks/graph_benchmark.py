@@ -44,12 +44,15 @@ from lhgraph.simulate import (  # noqa: E402
     write_simulation,
 )
 from lhgraph.streaming import StreamingSolver, cycles  # noqa: E402
-from lhgraph.transforms import euler_zyx, inverse, rotation_angle, se3_log  # noqa: E402
+from lhgraph.study import (  # noqa: E402
+    PAPER_MAE,
+    protocol_statistics,
+    signed_errors,
+    table_iii_markdown,
+)
+from lhgraph.transforms import inverse, rotation_angle, se3_log  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
-PAPER_MAE = [6.9, 9.3, 8.5, 0.10, 0.17, 0.16]
-PAPER_SD = [8.9, 13.5, 9.3, 0.11, 0.20, 0.22]
-COLUMNS = ["X (mm)", "Y (mm)", "Z (mm)", "alpha (deg)", "beta (deg)", "gamma (deg)"]
 
 
 def run_one(name: str, config: SimulationConfig, seed: int | None = None) -> dict:
@@ -66,7 +69,7 @@ def run_one(name: str, config: SimulationConfig, seed: int | None = None) -> dic
     dR = T_true[:3, :3].T @ T_est[:3, :3]
     xi = se3_log(inverse(T_true) @ T_est)
     cov = est.stations[1].covariance
-    return {"name": name, "signed": np.r_[dp * 1e3, np.degrees(euler_zyx(dR))],
+    return {"name": name, "signed": signed_errors(sim.truth, result.stations)[0],
             "pos_mm": float(np.linalg.norm(dp) * 1e3),
             "rot_deg": float(np.degrees(rotation_angle(dR))),
             "nees": float(xi @ np.linalg.solve(cov, xi)), "seconds": seconds,
@@ -74,21 +77,10 @@ def run_one(name: str, config: SimulationConfig, seed: int | None = None) -> dic
 
 
 def protocol_table(rows: list[dict]) -> list[str]:
-    signed = np.array([r["signed"] for r in rows])
-    mae = np.mean(np.abs(signed), axis=0)
-    setups = sorted({r["name"].split("/")[0] for r in rows})
-    sd = np.mean([np.std([r["signed"] for r in rows if r["name"].startswith(s + "/")],
-                         axis=0, ddof=1) for s in setups], axis=0)
-    fmt = ["{:.3f}"] * 3 + ["{:.4f}"] * 3
-    lines = ["| | " + " | ".join(COLUMNS) + " |", "|---" * 7 + "|"]
-    lines.append("| graph MAE | " + " | ".join(f.format(v) for f, v in zip(fmt, mae,
-                                                                           strict=True)) + " |")
-    lines.append("| graph average SD | " + " | ".join(f.format(v) for f, v in zip(fmt, sd,
-                                                                                  strict=True))
-                 + " |")
-    lines.append("| paper MAE | " + " | ".join(str(v) for v in PAPER_MAE) + " |")
-    lines.append("| paper average SD | " + " | ".join(str(v) for v in PAPER_SD) + " |")
-    ratio = np.array(PAPER_MAE) / mae
+    """Table III layout (lhgraph.study, shared with `lhgraph study`) and the MAE ratio."""
+    stats = protocol_statistics([r["name"] for r in rows], [r["signed"] for r in rows])
+    lines = table_iii_markdown({"graph": stats})
+    ratio = np.array(PAPER_MAE) / stats.mae
     lines.append("| paper MAE / graph MAE | " + " | ".join(f"{v:.0f}x" for v in ratio) + " |")
     return lines
 

@@ -34,12 +34,15 @@ from lhgraph.baseline import PaperOptions, solve_paper  # noqa: E402
 from lhgraph.errors import LhgraphError  # noqa: E402
 from lhgraph.fileio import check_writable  # noqa: E402
 from lhgraph.simulate import SimulationConfig, paper_protocol, simulate  # noqa: E402
-from lhgraph.transforms import euler_zyx  # noqa: E402
+from lhgraph.study import (  # noqa: E402
+    COLUMNS,
+    PAPER_MAE,
+    PAPER_SD,
+    protocol_statistics,
+    signed_errors,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
-COLUMNS = ["X (mm)", "Y (mm)", "Z (mm)", "alpha (deg)", "beta (deg)", "gamma (deg)"]
-PAPER_MAE = [6.9, 9.3, 8.5, 0.10, 0.17, 0.16]
-PAPER_SD = [8.9, 13.5, 9.3, 0.11, 0.20, 0.22]
 
 
 def run_one(name: str, config: SimulationConfig, options: PaperOptions) -> dict:
@@ -52,17 +55,8 @@ def run_one(name: str, config: SimulationConfig, options: PaperOptions) -> dict:
     except LhgraphError as exc:
         return {"name": name, "error": str(exc), "seconds": time.perf_counter() - tic}
     seconds = time.perf_counter() - tic
-    truth = capture.truth.relative_to_reference()
-    est = result.stations.relative_to_reference()
-    rows = []
-    for k in truth.indices():
-        if k == truth.reference:
-            continue
-        Tt, Te = truth.pose(k), est.pose(k)
-        dp_mm = (Te[:3, 3] - Tt[:3, 3]) * 1e3
-        de_deg = np.degrees(euler_zyx(Tt[:3, :3].T @ Te[:3, :3]))
-        rows.append(np.r_[dp_mm, de_deg])
-    return {"name": name, "signed": np.array(rows), "seconds": seconds,
+    return {"name": name, "signed": signed_errors(capture.truth, result.stations),
+            "seconds": seconds,
             "status": result.status, "rms_urad": result.residuals.rms_urad()}
 
 
@@ -110,9 +104,8 @@ def main(argv: list[str] | None = None) -> int:
     setups: dict[str, list[np.ndarray]] = {}
     for r in ok:
         setups.setdefault(r["name"].split("/")[0], []).append(r["signed"])
-    mae = np.mean(np.abs(signed), axis=0)
-    sds = [np.std(np.concatenate(v), axis=0, ddof=1) for v in setups.values() if len(v) > 1]
-    sd = np.mean(sds, axis=0) if sds else np.full(6, np.nan)
+    stats = protocol_statistics([r["name"] for r in ok], [r["signed"] for r in ok])
+    mae, sd = stats.mae, stats.sd
     seconds = np.array([r["seconds"] for r in results])
 
     header = ["", *COLUMNS]

@@ -1,0 +1,87 @@
+"""lhgraph view: the scene of a run directory and its headless export."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lhgraph.board import save_board
+from lhgraph.cli import main
+from lhgraph.errors import InputError
+from lhgraph.rundir import run_to_directory
+from lhgraph.simulate import default_simulation_config, simulate
+from lhgraph.solve import SolveConfig
+from lhgraph.stations import save_stations
+from lhgraph.trajectory import save_trajectory
+from lhgraph.viewer import build_scene, export, frustum_segments
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A run directory made from a simulation's truth (no solve needed for the viewer)."""
+    out = tmp_path_factory.mktemp("run")
+    sim = simulate(dataclasses.replace(default_simulation_config(), duration_s=0.5), seed=2)
+    save_stations(sim.truth, out / "stations.toml")
+    save_trajectory(sim.trajectory, out / "trajectory.csv")
+    save_board(sim.board, out / "board.toml")
+    return out
+
+
+def test_frustum_geometry() -> None:
+    T = np.eye(4)
+    T[:3, 3] = [1.0, 2.0, 3.0]
+    seg = frustum_segments(T, depth_m=2.0, half_angle_deg=45.0)
+    assert seg.shape == (8, 2, 3)
+    far = seg[:4, 1] - T[:3, 3]
+    np.testing.assert_allclose(far[:, 0], 2.0)
+    np.testing.assert_allclose(np.abs(far[:, 1:]), 2.0)
+
+
+def test_scene_contents(run_dir: Path) -> None:
+    from lhgraph.board import load_board
+
+    board = load_board(run_dir / "board.toml")
+    scene = build_scene(run_dir, board, board_poses=3)
+    n_stations = 2
+    n_path = len((run_dir / "trajectory.csv").read_text().splitlines()) - 2
+    assert len(scene.segments) == n_stations * (3 + 8) + n_path
+    assert len(scene.points) == 3 * len(board.ids)
+    # the reference station's x axis starts at the origin and points along +x
+    np.testing.assert_allclose(scene.segments[0], [[0, 0, 0], [0.3, 0, 0]], atol=1e-12)
+
+
+def test_export_png_matplotlib_and_refusals(run_dir: Path, tmp_path: Path) -> None:
+    scene = build_scene(run_dir)
+    path, how = export(scene, tmp_path / "v.png", renderer="matplotlib")
+    assert how == "matplotlib" and path.read_bytes()[:4] == b"\x89PNG"
+    with pytest.raises(InputError, match="exists already"):
+        export(scene, tmp_path / "v.png")
+    with pytest.raises(InputError, match="unknown export format"):
+        export(scene, tmp_path / "v.jpg")
+    with pytest.raises(InputError, match="not a run directory"):
+        build_scene(tmp_path)
+
+
+def test_export_ply_with_open3d(run_dir: Path, tmp_path: Path) -> None:
+    o3d = pytest.importorskip("open3d", reason="open3d not importable (e.g. libusb missing)",
+                              exc_type=ImportError)
+    assert main(["view", str(run_dir), "--export", str(tmp_path / "v.ply"), "--quiet"]) == 0
+    mesh = o3d.io.read_triangle_mesh(str(tmp_path / "v.ply"))
+    assert len(mesh.triangles) > 0 and mesh.has_vertex_colors()
+    lo, hi = mesh.get_min_bound(), mesh.get_max_bound()
+    assert np.all(lo < 0.05) and np.all(hi > -0.05)  # the reference station at the origin
+
+
+def test_run_directory_board_found_from_summary(tmp_path: Path) -> None:
+    """A run directory written by `lhgraph solve` names its board in summary.json."""
+    sim = simulate(dataclasses.replace(default_simulation_config(), duration_s=1.0), seed=4)
+    from lhgraph.simulate import write_simulation
+
+    write_simulation(sim, tmp_path / "in")
+    config = SolveConfig(tmp_path / "in/board.toml", tmp_path / "in/angles.csv")
+    run_to_directory(config, tmp_path / "run")
+    scene = build_scene(tmp_path / "run", board_poses=2)
+    assert len(scene.points) == 2 * len(sim.board.ids)
