@@ -19,6 +19,7 @@ signed 32-bit integer).
 from __future__ import annotations
 
 import gzip
+import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,10 +27,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from .board import Board, make_board
 from .calibration import StationCalibration
 from .errors import InputError
 from .model import FactoryCalibration
 from .signal import LightPulses
+from .transforms import pose_from_quat
 
 TICK_HZ = 48_000_000
 _CAL_KEYS = {"phase": "fcalphase", "tilt": "fcaltilt", "curve": "fcalcurve",
@@ -178,6 +181,37 @@ def read_libsurvive_calibration(path: str | Path) -> dict[int, StationCalibratio
         out[int(m.group(1))] = StationCalibration(cal, station_id)
     if not out:
         raise InputError('no "lighthouseN" entries', path)
+    return out
+
+
+def read_libsurvive_board(path: str | Path, device: str) -> Board:
+    """The device's photodiodes (``modelPoints``/``modelNormals`` of its ``CONFIG`` line, m,
+    device frame) as a board; sensor ids are the indices used by its ``A`` lines."""
+    path = Path(path)
+    with _open_text(path) as f:
+        for line in f:
+            parts = line.split(maxsplit=3)
+            if len(parts) == 4 and parts[1] == device and parts[2] == "CONFIG":
+                try:
+                    config = json.loads(line.split("CONFIG", 1)[1])
+                    lc = config["lighthouse_config"]
+                    return make_board(lc["modelPoints"], lc["modelNormals"], name=device)
+                except (ValueError, KeyError, TypeError) as exc:
+                    raise InputError(f"{device} CONFIG has no usable sensor geometry ({exc})",
+                                     path) from None
+    raise InputError(f"no CONFIG line for device {device!r}", path)
+
+
+def read_libsurvive_poses(path: str | Path) -> dict[int, NDArray[np.float64]]:
+    """libsurvive's own solved ``T_world_lh`` per lighthouse index from a recording's
+    ``.json`` (its world and lighthouse frames: y up, lighthouse looking along -z)."""
+    text = Path(path).read_text(errors="replace")
+    out = {}
+    for m in re.finditer(r'"lighthouse(\d+)"\s*:\s*\{(.*?)\}', text, re.S):
+        found = re.search(r'"pose"\s*:\s*\[([^\]]*)\]', m.group(2))
+        if found:
+            v = [float(x.strip().strip('"')) for x in found.group(1).split(",")]
+            out[int(m.group(1))] = pose_from_quat(v[:3], v[3:7])
     return out
 
 

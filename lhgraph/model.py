@@ -130,7 +130,7 @@ def sweep_angle(
         return angle
 
     # d base: (-u, x, 0) / r^2 ; d asin(s): k / sqrt(1 - s^2) * (dw / r - w dr / r^2)
-    d_asin = k / np.sqrt(1.0 - s * s)
+    d_asin = k / np.sqrt(np.maximum(1.0 - s * s, 1e-12))
     d_primed_x = -u / r2 + s_t * d_asin * (-w * x / (r2 * r))
     d_primed_u = x / r2 + s_t * d_asin * (-w * u / (r2 * r))
     d_primed_w = s_t * d_asin / r
