@@ -117,7 +117,11 @@ def _refine(
         Hw = H * w[..., None]
         JtJ = np.swapaxes(Hw, 1, 2) @ H + 1e-12 * I6
         Jtr = (np.swapaxes(Hw, 1, 2) @ r[..., None])[..., 0]
-        delta = -np.linalg.solve(JtJ, Jtr[..., None])[..., 0]
+        # degenerate views (a sensor on a rotor axis, too few sensors) must not stop the rest
+        bad = ~(np.isfinite(JtJ).all(axis=(1, 2)) & np.isfinite(Jtr).all(axis=1))
+        JtJ[bad], Jtr[bad] = I6, 0.0
+        JtJ += 1e-9 * np.trace(JtJ, axis1=1, axis2=2)[:, None, None] * I6
+        delta = -(np.linalg.pinv(JtJ) @ Jtr[..., None])[..., 0]
         T = T @ se3_exp(delta)
         if np.max(np.abs(delta)) < 1e-9:
             break
