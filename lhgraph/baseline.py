@@ -56,8 +56,8 @@ class PaperOptions:
       periods of the interpolated series.
     - ``warm_start``: start each measurement's Nelder-Mead from the previous measurement's
       pose (faster, not the paper's; the first one and any after a gap start cold).
-    - ``mirror_check``: on cold starts, also refine the planar-board mirror pose, keep the
-      better fit.
+    - ``mirror_check``: also refine the planar-board mirror of each fitted pose, keep the
+      better fit (warm starts included: without it they can follow the wrong branch).
     - ``min_sensors``: a measurement needs this many sensors with both angles.
     - ``min_measurements``: a station needs this many usable measurements.
     - ``kabsch_points``: ``"board"`` superposes the board centres (paper), ``"sensors"``
@@ -246,9 +246,9 @@ def estimate_board_pose(azimuth: ArrayLike, elevation: ArrayLike, s_board: Array
 
     ``azimuth``, ``elevation`` (n,) ideal angles (rad) of the sensors at ``s_board`` (n, 3)
     (board frame, m; normals ``n_board``), all with both angles. Nelder-Mead on
-    ``K1 = sum (C(L, P) - M)^2`` from :func:`initial_board_pose` (cold start; with
-    ``options.mirror_check`` the mirror of the result is refined too and the better kept), or
-    from ``T_init`` (warm start, no mirror check). Returns ``(T_lh_board, K1 rad^2, K1 calls)``.
+    ``K1 = sum (C(L, P) - M)^2`` from :func:`initial_board_pose` (cold start) or from
+    ``T_init`` (warm start); with ``options.mirror_check`` the mirror of the result is refined
+    too and the better kept. Returns ``(T_lh_board, K1 rad^2, K1 calls)``.
     """
     options = options or PaperOptions()
     s = np.asarray(s_board, dtype=float)
@@ -257,10 +257,11 @@ def estimate_board_pose(azimuth: ArrayLike, elevation: ArrayLike, s_board: Array
     if T_init is not None:
         T0 = np.asarray(T_init, dtype=float)
         depth = float(np.linalg.norm(T0[:3, 3]))
-        return _minimise_board(s, measured, T0, 0.02, 0.005 * depth, options)
-    T0 = initial_board_pose(measured[:, 0], measured[:, 1], s, n_board)
-    depth = float(np.linalg.norm(T0[:3, 3]))
-    T, cost, nfev = _minimise_board(s, measured, T0, 0.2, 0.05 * depth, options)
+        T, cost, nfev = _minimise_board(s, measured, T0, 0.02, 0.005 * depth, options)
+    else:
+        T0 = initial_board_pose(measured[:, 0], measured[:, 1], s, n_board)
+        depth = float(np.linalg.norm(T0[:3, 3]))
+        T, cost, nfev = _minimise_board(s, measured, T0, 0.2, 0.05 * depth, options)
     if options.mirror_check:
         Tm, cost_m, nfev_m = _minimise_board(s, measured, mirror_pose(T, s), 0.05,
                                              0.01 * depth, options)

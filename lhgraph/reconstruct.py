@@ -58,11 +58,6 @@ class Measurements:
         """(M, S) mask of sensors that have both angles."""
         return np.isfinite(self.azimuth) & np.isfinite(self.elevation)
 
-    def select(self, mask: NDArray) -> Measurements:
-        """Measurements where ``mask`` (bool or index array over M) holds."""
-        return Measurements(self.lighthouse, self.time[mask], self.azimuth[mask],
-                            self.elevation[mask], self.sensor_ids, self.source_axis[mask])
-
 
 @dataclass
 class _Sweeps:

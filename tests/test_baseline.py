@@ -23,7 +23,7 @@ from lhgraph.boards import paper_board
 from lhgraph.errors import InputError, SolverError
 from lhgraph.metrics import station_errors
 from lhgraph.model import FactoryCalibration, StationModel, ideal_angles
-from lhgraph.reconstruct import Measurements
+from lhgraph.reconstruct import Measurements, reconstruct_measurements
 from lhgraph.simulate import load_simulation_config, parse_simulation_config, simulate
 from lhgraph.trajectory import Trajectory
 from lhgraph.transforms import (
@@ -275,7 +275,6 @@ def test_no_time_overlap_is_reported(small_capture):
 def test_estimate_board_poses_marks_thin_measurements_invalid(small_capture):
     cap = small_capture
     a = cap.angles.select(cap.angles.lighthouse == 0)
-    from lhgraph.reconstruct import reconstruct_measurements
     meas = reconstruct_measurements(a, cap.board)
     meas.azimuth[5, 3:] = np.nan  # only 3 sensors left with both angles
     poses = estimate_board_poses(meas, cap.board, PaperOptions(warm_start=True))
