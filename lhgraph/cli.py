@@ -90,6 +90,8 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
     p.add_argument("--truth", help="true stations TOML: print the errors")
     p.add_argument("--reference", type=int, help="station index of the world frame")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="solve only the first S seconds in which the board moves")
     _add_common_output(p)
     return p
 
@@ -116,6 +118,8 @@ def run_solve(args: argparse.Namespace) -> int:
         value = getattr(args, key)
         if value is not None:
             setattr(config, key, Path(value) if key not in ("method", "reference") else value)
+    if args.duration is not None:
+        config.duration_s = args.duration
     if config.output is None:
         raise InputError("no output: give --output or set 'output' in the config")
     progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))

@@ -83,7 +83,8 @@ class SolveConfig:
     The angles come from ``angles`` or, when ``capture`` is set instead, from decoding that
     capture (its OOTX calibration is used unless ``calibration`` is given). ``methods``
     (several methods, run directory output only) overrides ``method``; ``seed`` is recorded
-    in a run directory's summary; ``path`` is the configuration file itself.
+    in a run directory's summary; ``path`` is the configuration file itself; ``duration_s``
+    keeps only that many seconds from the moment the board starts moving.
     """
 
     board: Path
@@ -99,6 +100,7 @@ class SolveConfig:
     methods: list[str] | None = None
     seed: int | None = None
     path: Path | None = None
+    duration_s: float | None = None
 
     def method_list(self) -> list[str]:
         """The methods to run, in order."""
@@ -147,7 +149,7 @@ def load_solve_config(path: str | Path) -> SolveConfig:
     data = read_toml(path)
     base = path.parent
     known = {"board", "angles", "output", "method", "calibration", "trajectory", "truth",
-             "reference", "graph", "capture", "methods", "seed"}
+             "reference", "graph", "capture", "methods", "seed", "duration"}
     for key in data:
         if key not in known:
             raise InputError(f"unknown key '{key}' (known: {', '.join(sorted(known))})", path,
@@ -180,11 +182,12 @@ def load_solve_config(path: str | Path) -> SolveConfig:
     graph = parse_graph_options(data.get("graph", {}), path)
     reference = as_int(data["reference"], path, "reference") if "reference" in data else None
     seed = as_int(data["seed"], path, "seed") if "seed" in data else None
+    duration = as_float(data["duration"], path, "duration") if "duration" in data else None
     return SolveConfig(
         board=a_path("board", True), angles=a_path("angles"), output=a_path("output"),
         method=method, calibration=a_path("calibration"), trajectory=a_path("trajectory"),
         truth=a_path("truth"), reference=reference, graph=graph, capture=a_path("capture"),
-        methods=methods, seed=seed, path=path,
+        methods=methods, seed=seed, path=path, duration_s=duration,
     )
 
 
@@ -208,6 +211,12 @@ def load_inputs(config: SolveConfig) -> SolveInputs:
     else:
         raise InputError("no angles: give 'angles' or 'capture'", config.path, "angles")
     angles.check_board(board, source)
+    if config.duration_s is not None:
+        from .window import moving_window
+
+        angles = moving_window(angles, config.duration_s)
+        notes.append(f"solved {config.duration_s:g} s from the start of motion "
+                     f"(t = {angles.time[0]:.3f} s)")
     return SolveInputs(board, angles, models, notes)
 
 
