@@ -51,8 +51,8 @@ class GraphOptions:
     ``accel_psd_rot``/``accel_psd_pos``: power spectral density of the board's angular
     (rad^2/s^3) and linear (m^2/s^3) acceleration noise in the motion prior (starting values
     when ``adapt_motion_prior``: then up to ``motion_prior_rounds`` variance-component updates
-    rescale both to the solved motion, LM solver only, never above ``max_psd_factor`` times the
-    start); ``solver``:
+    rescale both to the solved motion, LM solver only, kept within [``min_psd_factor``,
+    ``max_psd_factor``] times the start); ``solver``:
     ``"lm"`` (Levenberg-Marquardt on GTSAM's linear solver) or ``"isam2"``;
     ``max_iterations``; ``reference``: station index of the world frame (default: the
     lowest index present).
@@ -66,6 +66,7 @@ class GraphOptions:
     accel_psd_pos: float = 1.0
     adapt_motion_prior: bool = True
     max_psd_factor: float = 10.0
+    min_psd_factor: float = 0.3
     motion_prior_rounds: int = 5
     solver: str = "lm"
     max_iterations: int = 30
@@ -477,6 +478,9 @@ def _adaptive_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ev: _E
         ratio = float(np.clip(ev.motion_chi2_per_dof(), 1e-3, 1e3))
         # a model misfit shows up as board jitter: never loosen the prior beyond the cap
         ratio = min(ratio, options.max_psd_factor / ev.motion_scale**-2)
+        # nor stiffen it below the floor: a real board's motion is not exactly WNOA, and an
+        # over-stiff prior trades the station's accuracy for smoothness
+        ratio = max(ratio, options.min_psd_factor / ev.motion_scale**-2)
         if progress:
             progress(f"motion prior: chi2/dof {ratio:.3g}")
         if 0.8 < ratio < 1.25:

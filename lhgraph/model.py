@@ -29,9 +29,10 @@ CALIBRATION_KEYS = ("phase", "tilt", "curve", "gibphase", "gibmag")
 
 @dataclass(frozen=True)
 class Convention:
-    """Signs of the gib and curve terms (public implementations disagree; see docs/model.md)."""
+    """Signs of the gib and curve terms. Public implementations disagree; the default
+    (gib -1, curve +1) fits two real recordings best (docs/model.md)."""
 
-    gib_sign: float = 1.0
+    gib_sign: float = -1.0
     curve_sign: float = 1.0
 
 

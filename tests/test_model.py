@@ -43,10 +43,11 @@ def test_factory_terms_match_spec_formula():
     a0 = t0 + CAL.gibmag[0] * np.sin(CAL.gibphase[0] + t0) + CAL.curve[0] * np.arctan2(z, x) ** 2
     t1 = np.arctan2(z, x) - CAL.phase[1] + np.arcsin(np.tan(CAL.tilt[1]) * y / np.hypot(x, z))
     a1 = t1 + CAL.gibmag[1] * np.sin(CAL.gibphase[1] + t1) + CAL.curve[1] * np.arctan2(y, x) ** 2
-    m = StationModel(CAL)
+    m = StationModel(CAL, convention=Convention(gib_sign=1.0, curve_sign=1.0))
     assert sweep_angle(p, [0], m)[0] == pytest.approx(a0, abs=1e-15)
     assert sweep_angle(p, [1], m)[0] == pytest.approx(a1, abs=1e-15)
-    flipped = StationModel(CAL, convention=Convention(gib_sign=-1.0, curve_sign=1.0))
+    flipped = StationModel(CAL)  # the default, settled on real data: gib -1, curve +1
+    assert flipped.convention == Convention(gib_sign=-1.0, curve_sign=1.0)
     expected = t0 - CAL.gibmag[0] * np.sin(CAL.gibphase[0] + t0) + CAL.curve[0] * np.arctan2(
         z, x) ** 2
     assert sweep_angle(p, [0], flipped)[0] == pytest.approx(expected, abs=1e-15)

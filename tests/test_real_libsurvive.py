@@ -24,9 +24,11 @@ def test_graph_agrees_with_libsurvive_on_real_data():
     result = solve_graph(board, decoded.angles, models)
     ls = read_libsurvive_poses(Path(str(FIXTURE) + ".json"))
     ours, theirs = result.stations.pose(1), inverse(ls[1]) @ ls[0]
-    # frame-independent: station distance and relative rotation angle
+    # frame-independent: station distance and relative rotation angle. libsurvive is no
+    # ground truth: its solution uses its own gib sign, which alone moves the relative
+    # rotation by ~2 deg here (docs/results/libsurvive_check.md)
     assert abs(np.linalg.norm(ours[:3, 3]) - np.linalg.norm(theirs[:3, 3])) < 0.15
-    assert abs(np.degrees(rotation_angle(ours[:3, :3]) - rotation_angle(theirs[:3, :3]))) < 2.0
+    assert abs(np.degrees(rotation_angle(ours[:3, :3]) - rotation_angle(theirs[:3, :3]))) < 3.0
     assert np.median(np.abs(result.residuals.residual_rad)) < 1e-4
     assert result.residuals.inlier_fraction() > 0.7
 
