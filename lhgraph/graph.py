@@ -399,7 +399,7 @@ def _damping(values: gtsam.Values, lam: float) -> gtsam.GaussianFactorGraph:
 def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                          options: GraphOptions, progress: Progress | None,
                          max_iterations: int | None = None, history: list[float] | None = None
-                         ) -> tuple[gtsam.Values, gtsam.GaussianFactorGraph, int, float]:
+                         ) -> tuple[gtsam.Values, int, float]:
     """Levenberg-Marquardt driven from Python on GTSAM's sparse linear solver.
 
     GTSAM's own optimisers copy the whole ``Values`` for every Python factor callback (7 s
@@ -426,9 +426,9 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
             values, error = candidate, new_error
             lam = lam / 10.0 if lam > 1e-6 else 0.0
         history.append(error)
-        if improvement < 1e-6 * max(error, 1.0):
+        if improvement < 1e-5 * max(error, 1.0):
             break
-    return values, graph.linearize(values), iterations, error
+    return values, iterations, error
 
 
 def _with(a: gtsam.GaussianFactorGraph, b: gtsam.GaussianFactorGraph
@@ -462,15 +462,15 @@ def _isam2(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, options: Gra
 
 def _adaptive_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ev: _Evaluator,
                  options: GraphOptions, progress: Progress | None
-                 ) -> tuple[gtsam.Values, gtsam.GaussianFactorGraph, int, float]:
+                 ) -> tuple[gtsam.Values, int, float]:
     """LM solves alternating with a variance-component update of the motion prior's strength:
     its covariance is scaled until the solved motion's whitened prior residuals have unit
     variance per degree of freedom (so the prior matches how the board actually moved).
-    Intermediate rounds take at most two LM iterations; the last one runs to convergence."""
+    Adapting rounds take at most two LM iterations; a last LM run converges."""
     total = 0
     rounds = options.motion_prior_rounds if options.adapt_motion_prior else 0
     for _ in range(rounds):
-        values, _lin, iterations, _error = _levenberg_marquardt(graph, values, options,
+        values, iterations, _error = _levenberg_marquardt(graph, values, options,
                                                                 progress, max_iterations=2,
                                                                 history=ev.error_history)
         total += iterations
@@ -483,14 +483,12 @@ def _adaptive_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ev: _E
         ratio = max(ratio, options.min_psd_factor / ev.motion_scale**-2)
         if progress:
             progress(f"motion prior: chi2/dof {ratio:.3g}")
-        if 0.8 < ratio < 1.25:
-            if iterations < 2:  # the round converged: the prior matches the motion
-                break
-            continue
+        if 0.8 < ratio < 1.25:  # the prior matches the motion (or sits at its bound)
+            break
         ev.scale_motion_prior(ratio)
-    values, lin, iterations, error = _levenberg_marquardt(graph, values, options, progress,
+    values, iterations, error = _levenberg_marquardt(graph, values, options, progress,
                                                           history=ev.error_history)
-    return values, lin, total + iterations, error
+    return values, total + iterations, error
 
 
 def _optimise(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, problem: GraphProblem,
@@ -498,15 +496,14 @@ def _optimise(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, problem: 
               ) -> tuple[gtsam.Values, dict[int, Array], int, float]:
     """Batch solve; returns values, station covariances, iterations and final error."""
     if options.solver == "lm":
-        result, lin, iterations, error = _adaptive_lm(graph, values, ev, options, progress)
+        result, iterations, error = _adaptive_lm(graph, values, ev, options, progress)
     elif options.solver == "isam2":
         result, iterations = _isam2(graph, values, options, progress)
         result = gtsam.Values(result)
         error = graph.error(result)
-        lin = graph.linearize(result)
     else:
         raise SolverError(f"unknown solver '{options.solver}' (expected lm or isam2)")
-    marginals = gtsam.Marginals(lin, result)
+    marginals = gtsam.Marginals(graph.linearize(result), result)
     cov = {slot: marginals.marginalCovariance(L(slot))
            for slot in range(1, len(problem.station_ids))}
     return result, cov, iterations, error

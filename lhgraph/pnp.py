@@ -71,8 +71,9 @@ def _homography_poses(uv: Array, mask: NDArray[np.bool_], plane_xy: Array) -> Ar
     A[:, 1::2, :] = np.stack([zero, zero, zero, X, Y, one, -v * X, -v * Y, -v], axis=-1)
     weights = mask.astype(float)
     for _ in range(4):  # iteratively reweighted DLT: Cauchy weights on the transfer error
-        _, _, Vt = np.linalg.svd(A * np.repeat(weights, 2, axis=1)[..., None])
-        h = Vt[:, -1, :]
+        Aw = A * np.repeat(weights, 2, axis=1)[..., None]
+        _, vecs = np.linalg.eigh(np.swapaxes(Aw, 1, 2) @ Aw)  # 9x9 normal matrix, not SVD
+        h = vecs[:, :, 0]
         proj = np.stack([X, Y, one], axis=-1) @ h.reshape(M, 3, 3).transpose(0, 2, 1)
         err = np.hypot(proj[..., 0] / proj[..., 2] - u, proj[..., 1] / proj[..., 2] - v)
         typical = np.nanmedian(np.where(mask, err, np.nan), axis=1, keepdims=True)
@@ -121,9 +122,12 @@ def _refine(
         bad = ~(np.isfinite(JtJ).all(axis=(1, 2)) & np.isfinite(Jtr).all(axis=1))
         JtJ[bad], Jtr[bad] = I6, 0.0
         JtJ += 1e-9 * np.trace(JtJ, axis1=1, axis2=2)[:, None, None] * I6
-        delta = -(np.linalg.pinv(JtJ) @ Jtr[..., None])[..., 0]
+        try:
+            delta = -np.linalg.solve(JtJ, Jtr[..., None])[..., 0]
+        except np.linalg.LinAlgError:  # rare: fall back to the (slower) pseudo-inverse
+            delta = -(np.linalg.pinv(JtJ) @ Jtr[..., None])[..., 0]
         T = T @ se3_exp(delta)
-        if np.max(np.abs(delta)) < 1e-9:
+        if np.max(np.abs(delta)) < 1e-8:
             break
     n = np.maximum(2 * mask.sum(axis=1), 1)
     rms = np.sqrt(np.sum(r**2, axis=1) / n)
@@ -215,7 +219,10 @@ def board_poses(
                                           iterations, huber_rad)
         typical = np.nanmedian(np.where(used, worst, np.nan), axis=1, keepdims=True)
         inlier = mk & (worst < np.maximum(outlier_factor * typical, outlier_floor_rad))
-        used = np.where((inlier.sum(axis=1) >= min_sensors)[:, None], inlier, mk)
+        kept = np.where((inlier.sum(axis=1) >= min_sensors)[:, None], inlier, mk)
+        if np.array_equal(kept, used):
+            break  # no outliers to drop
+        used = kept
     in_front = T[:, 0, 3] > 0
     T_out[ok] = np.where(in_front[:, None, None], T, np.nan)
     rms_out[ok] = np.where(in_front, rms, np.nan)
