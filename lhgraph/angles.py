@@ -97,10 +97,10 @@ def validate(a: Angles, source: str | Path | None = None) -> Angles:
 
 def load_angles(path: str | Path) -> Angles:
     """Read and validate an angles CSV."""
-    cols = read_csv_columns(path, COLUMNS, optional=())
-    extra_cols = read_csv_columns(path, (), optional=_extra_names(path))
+    extras = _extra_names(path)
+    cols = read_csv_columns(path, COLUMNS, optional=extras)
     a = Angles(cols["time"], cols["lighthouse"], cols["axis"], cols["sensor"], cols["angle"],
-               extra_cols)
+               {k: cols[k] for k in extras if k in cols})
     if len(a) == 0:
         raise InputError("no rows after the header", path)
     return validate(a, path)

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 Array = NDArray[np.float64]
 
@@ -28,15 +27,25 @@ def skew(v: ArrayLike) -> Array:
 
 
 def so3_exp(omega: ArrayLike) -> Array:
-    """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` (rad)."""
+    """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` (rad), Rodrigues."""
     omega = np.asarray(omega, dtype=float)
-    return Rotation.from_rotvec(omega.reshape(-1, 3)).as_matrix().reshape(omega.shape + (3,))
+    theta = np.linalg.norm(omega, axis=-1)[..., None, None]
+    small = theta < 1e-6
+    th = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - theta**2 / 6.0, np.sin(th) / th)
+    b = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(th)) / th**2)
+    W = skew(omega)
+    return np.eye(3) + a * W + b * (W @ W)
 
 
 def so3_log(R: ArrayLike) -> Array:
     """Rotation vectors ``(..., 3)`` (rad) of rotation matrices ``(..., 3, 3)``."""
-    R = np.asarray(R, dtype=float)
-    return Rotation.from_matrix(R.reshape(-1, 3, 3)).as_rotvec().reshape(R.shape[:-1])
+    q = matrix_to_quat(R)  # w >= 0: angle in [0, pi]
+    w, v = q[..., 0], q[..., 1:]
+    s = np.linalg.norm(v, axis=-1)
+    angle = 2.0 * np.arctan2(s, w)
+    scale = np.where(s < 1e-12, 2.0 / np.maximum(w, 1e-12), angle / np.maximum(s, 1e-300))
+    return v * scale[..., None]
 
 
 def so3_left_jacobian(omega: ArrayLike) -> Array:
@@ -98,16 +107,52 @@ def transform_points(T: ArrayLike, p: ArrayLike) -> Array:
 def quat_to_matrix(q_wxyz: ArrayLike) -> Array:
     """Rotation matrices from quaternions ``[w, x, y, z]`` (normalised first)."""
     q = np.asarray(q_wxyz, dtype=float)
-    flat = q.reshape(-1, 4)
-    R = Rotation.from_quat(flat[:, [1, 2, 3, 0]]).as_matrix()
-    return R.reshape(q.shape[:-1] + (3, 3))
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = (q[..., i] for i in range(4))
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - w * z)
+    R[..., 0, 2] = 2 * (x * z + w * y)
+    R[..., 1, 0] = 2 * (x * y + w * z)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - w * x)
+    R[..., 2, 0] = 2 * (x * z - w * y)
+    R[..., 2, 1] = 2 * (y * z + w * x)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
 
 
 def matrix_to_quat(R: ArrayLike) -> Array:
-    """Quaternions ``[w, x, y, z]`` (w >= 0) of rotation matrices ``(..., 3, 3)``."""
+    """Quaternions ``[w, x, y, z]`` (w >= 0) of rotation matrices ``(..., 3, 3)``.
+
+    Shepperd's method: each quaternion is read from the largest of its four squared
+    components, so it stays accurate near 180 degrees.
+    """
     R = np.asarray(R, dtype=float)
-    xyzw = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat()
-    q = xyzw[:, [3, 0, 1, 2]]
+    m = R.reshape(-1, 3, 3)
+    tr = np.trace(m, axis1=1, axis2=2)
+    diag = np.stack([tr, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], axis=1)
+    k = np.argmax(diag, axis=1)
+    q = np.empty((len(m), 4))
+    r = np.sqrt(np.maximum(1.0 + 2.0 * diag[np.arange(len(m)), k] - tr, 1e-300))
+    # k = 0: w largest
+    i = k == 0
+    q[i] = np.stack([r[i] / 2, (m[i, 2, 1] - m[i, 1, 2]) / (2 * r[i]),
+                     (m[i, 0, 2] - m[i, 2, 0]) / (2 * r[i]),
+                     (m[i, 1, 0] - m[i, 0, 1]) / (2 * r[i])], axis=1)
+    i = k == 1
+    q[i] = np.stack([(m[i, 2, 1] - m[i, 1, 2]) / (2 * r[i]), r[i] / 2,
+                     (m[i, 0, 1] + m[i, 1, 0]) / (2 * r[i]),
+                     (m[i, 0, 2] + m[i, 2, 0]) / (2 * r[i])], axis=1)
+    i = k == 2
+    q[i] = np.stack([(m[i, 0, 2] - m[i, 2, 0]) / (2 * r[i]),
+                     (m[i, 0, 1] + m[i, 1, 0]) / (2 * r[i]), r[i] / 2,
+                     (m[i, 1, 2] + m[i, 2, 1]) / (2 * r[i])], axis=1)
+    i = k == 3
+    q[i] = np.stack([(m[i, 1, 0] - m[i, 0, 1]) / (2 * r[i]),
+                     (m[i, 0, 2] + m[i, 2, 0]) / (2 * r[i]),
+                     (m[i, 1, 2] + m[i, 2, 1]) / (2 * r[i]), r[i] / 2], axis=1)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
     q *= np.where(q[:, :1] < 0, -1.0, 1.0)
     return q.reshape(R.shape[:-2] + (4,))
 
