@@ -7,8 +7,8 @@
    measurements, 8 s, quantisation noise only): Table III layout (MAE and average per-setup
    SD) next to the paper's figures; median position/rotation error; NEES of the reported
    6x6 covariance (expected mean 6).
-2. Board speed 0.2-2 m/s on the default layout (5 seeds each): median errors.
-3. 3 % reflections vs clean on the default layout (5 seeds).
+2. Board speed 0.2-2 m/s on the default layout (10 seeds each): median errors.
+3. 3 % reflections vs clean on the default layout (10 seeds).
 4. Run time: `solve` of an 8 s capture in-process (median of 5, wall and CPU time) and the
    whole `lhgraph solve` process (median of 3), a 60 s capture, and the streaming mode's
    update time per 33 ms sync cycle.
@@ -94,7 +94,7 @@ def main() -> int:
     parser.add_argument("--force", action="store_true")
     args = parser.parse_args()
     out = check_writable(args.output, args.force)
-    seeds = range(2 if args.quick else 5)
+    seeds = range(3 if args.quick else 10)
     lines = ["# Factor-graph solver: measured accuracy and speed", "",
              f"Command: `python benchmarks/graph_benchmark.py {shlex.join(sys.argv[1:])}`  ",
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
