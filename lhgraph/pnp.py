@@ -96,43 +96,57 @@ def _refine(
     T: Array, meas: Array, mask: NDArray[np.bool_], positions: Array, model: StationModel,
     iterations: int, huber_rad: float,
 ) -> tuple[Array, Array, Array]:
-    """Gauss-Newton (Huber-weighted) on the full model.
+    """Gauss-Newton (Huber-weighted) on the full model, over the seen sensors only; each
+    measurement stops as soon as its own step is below 1e-8.
 
     Returns poses, rms residual (rad) and each sensor's larger absolute residual (M, S).
     """
     M, S = mask.shape
-    s = np.broadcast_to(positions, (M, S, 3)).reshape(-1, 3)
-    m = mask.reshape(-1)
+    T = T.copy()
+    mi, si = np.nonzero(mask)  # seen (measurement, sensor) entries, grouped by measurement
+    s_seen, z_seen = positions[si], meas[mi, si]
+    counts = mask.sum(axis=1)
+    active = counts > 0
     I6 = np.eye(6)
     for _ in range(iterations):
-        Tb = np.repeat(T, S, axis=0)
-        H_all, r_all = [], []
-        for axis in (0, 1):
-            ax = np.full(M * S, axis)
-            pred, _, H = predict(np.eye(4), Tb, s, ax, model, jacobians=True)
-            r_all.append(np.where(m, pred - meas[..., axis].reshape(-1), 0.0))
-            H_all.append(np.where(m[:, None], H, 0.0))
-        r = np.stack(r_all, axis=1).reshape(M, 2 * S)
-        H = np.stack(H_all, axis=1).reshape(M, 2 * S, 6)
+        act = np.flatnonzero(active)
+        if len(act) == 0:
+            break
+        e = active[mi]
+        r, H = _residuals(T[mi[e]], s_seen[e], z_seen[e], model, jacobians=True)
         w = np.minimum(1.0, huber_rad / np.maximum(np.abs(r), 1e-15))
         Hw = H * w[..., None]
-        JtJ = np.swapaxes(Hw, 1, 2) @ H + 1e-12 * I6
-        Jtr = (np.swapaxes(Hw, 1, 2) @ r[..., None])[..., 0]
+        offsets = np.r_[0, np.cumsum(counts[act])[:-1]]
+        JtJ = np.add.reduceat(np.einsum("eai,eaj->eij", Hw, H), offsets, axis=0)
+        Jtr = np.add.reduceat(np.einsum("eai,ea->ei", Hw, r), offsets, axis=0)
         # degenerate views (a sensor on a rotor axis, too few sensors) must not stop the rest
         bad = ~(np.isfinite(JtJ).all(axis=(1, 2)) & np.isfinite(Jtr).all(axis=1))
         JtJ[bad], Jtr[bad] = I6, 0.0
-        JtJ += 1e-9 * np.trace(JtJ, axis1=1, axis2=2)[:, None, None] * I6
+        JtJ += (1e-9 * np.trace(JtJ, axis1=1, axis2=2)[:, None, None] + 1e-12) * I6
         try:
             delta = -np.linalg.solve(JtJ, Jtr[..., None])[..., 0]
         except np.linalg.LinAlgError:  # rare: fall back to the (slower) pseudo-inverse
             delta = -(np.linalg.pinv(JtJ) @ Jtr[..., None])[..., 0]
-        T = T @ se3_exp(delta)
-        if np.max(np.abs(delta)) < 1e-8:
-            break
-    n = np.maximum(2 * mask.sum(axis=1), 1)
-    rms = np.sqrt(np.sum(r**2, axis=1) / n)
-    worst = np.max(np.abs(r.reshape(M, 2, S)), axis=1)
+        T[act] = T[act] @ se3_exp(delta)
+        active[act[np.max(np.abs(delta), axis=1) < 1e-8]] = False
+    r = _residuals(T[mi], s_seen, z_seen, model)
+    rms = np.sqrt(np.bincount(mi, np.sum(r**2, axis=1), minlength=M)
+                  / np.maximum(2 * counts, 1))
+    worst = np.zeros((M, S))
+    worst[mi, si] = np.max(np.abs(r), axis=1)
     return T, rms, worst
+
+
+def _residuals(T_lh_board: Array, s: Array, z: Array, model: StationModel,
+               jacobians: bool = False) -> Array | tuple[Array, Array]:
+    """Azimuth and elevation residuals (E, 2) of sensors ``s`` at poses ``T_lh_board`` (E, ...)
+    against measured ``z`` (E, 2), with board-pose Jacobians (E, 2, 6) when asked."""
+    out = [predict(np.eye(4), T_lh_board, s, np.full(len(s), axis), model, jacobians=jacobians)
+           for axis in (0, 1)]
+    if not jacobians:
+        return np.stack(out, axis=1) - z
+    r = np.stack([o[0] for o in out], axis=1) - z
+    return r, np.stack([o[2] for o in out], axis=1)
 
 
 def _facing(T_lh_board: Array, positions: Array, normals: Array,
