@@ -45,9 +45,11 @@ Progress = Callable[[str], None]
 class GraphOptions:
     """Solver settings (units in the names; defaults suit 2 MHz LH1 captures).
 
-    ``angle_sigma_rad``: per-diode angle noise; ``sweep_offset_sigma_rad``: noise common to all
-    diodes of one sweep (the sampled sync edge); ``loss``: per-diode robust loss
-    (``"cauchy"`` or ``"huber"``) and ``huber_k`` its scale in sigmas;
+    ``angle_sigma_rad``: per-diode angle noise (the floor when ``adapt_angle_sigma``: then the
+    rounds also raise it to the residuals' robust spread, at most ``max_sigma_factor`` times);
+    ``sweep_offset_sigma_rad``: noise common to all diodes of one sweep (the sampled sync
+    edge); ``loss``: per-diode robust loss (``"cauchy"`` or ``"huber"``) and ``huber_k``
+    its scale in sigmas;
     ``accel_psd_rot``/``accel_psd_pos``: power spectral density of the board's angular
     (rad^2/s^3) and linear (m^2/s^3) acceleration noise in the motion prior (starting values
     when ``adapt_motion_prior``: then up to ``motion_prior_rounds`` variance-component updates
@@ -66,6 +68,8 @@ class GraphOptions:
     accel_psd_pos: float = 1.0
     adapt_motion_prior: bool = True
     max_psd_factor: float = 10.0
+    adapt_angle_sigma: bool = True
+    max_sigma_factor: float = 10.0
     min_psd_factor: float = 0.3
     motion_prior_rounds: int = 5
     solver: str = "lm"
@@ -247,7 +251,14 @@ class _Evaluator:
         self.recomputes = 0
         self._values: gtsam.Values | None = None
         self.motion_scale = 1.0  # 1/sqrt(s): the motion prior's covariance is s * Q
+        self.bearing_scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
         self._jacobians_ready = False
+
+    def scale_bearing_noise(self, factor: float) -> None:
+        """Multiply the diodes' angle variance by ``factor`` (cached residuals go stale)."""
+        self.bearing_scale /= np.sqrt(factor)
+        self._values = None
+        self.X = np.full_like(self.X, np.nan)
 
     def scale_motion_prior(self, factor: float) -> None:
         """Multiply the motion prior's covariance by ``factor`` (cached residuals go stale)."""
@@ -260,6 +271,10 @@ class _Evaluator:
         prior (1 if its strength matches the solved motion)."""
         Q = wnoa_covariance(self.dt, self._psd[0], self._psd[1])
         return float(np.mean(np.einsum("ki,kij,kj->k", self.e, np.linalg.inv(Q), self.e)) / 12)
+
+    def angle_sigma(self, options: GraphOptions) -> float:
+        """Effective per-diode angle noise (rad) now."""
+        return options.angle_sigma_rad / self.bearing_scale
 
     def motion_psd(self) -> tuple[float, float]:
         """Effective (rotational, linear) acceleration PSD of the motion prior now."""
@@ -280,6 +295,7 @@ class _Evaluator:
         h = self.p.hits
         self.r = bearing_residuals(h, self.X, self.V, self.L, self.p.models, False)[0]
         self.r += self.B[h.state]
+        self.r_whitened = self.r * self.bearing_scale
         self.e = motion_residuals(self.X[:-1], self.V[:-1], self.X[1:], self.V[1:], self.dt,
                                   False)[0] * self.motion_scale
         self._jacobians_ready = False
@@ -291,8 +307,9 @@ class _Evaluator:
         (error-only evaluations never need them)."""
         if self._jacobians_ready:
             return
-        _, self.HX, self.HV, self.HL = bearing_residuals(self.p.hits, self.X, self.V, self.L,
-                                                         self.p.models)
+        _, HX, HV, HL = bearing_residuals(self.p.hits, self.X, self.V, self.L, self.p.models)
+        self.HX, self.HV, self.HL = (H * self.bearing_scale for H in (HX, HV, HL))
+        self._offset_jacobian = self._ones * self.bearing_scale
         _, He = motion_residuals(self.X[:-1], self.V[:-1], self.X[1:], self.V[1:], self.dt)
         self.He = tuple(H * self.motion_scale for H in He)
         self._jacobians_ready = True
@@ -321,10 +338,10 @@ class _Evaluator:
                 self._jacobians()
                 H[0] = self.HX[a:b]
                 H[1] = self.HV[a:b]
-                H[2] = self._ones[a:b]
+                H[2] = self._offset_jacobian[a:b]
                 if station_var is not None:
                     H[3] = self.HL[a:b]
-            return self.r[a:b]
+            return self.r_whitened[a:b]
 
         return error
 
@@ -468,7 +485,8 @@ def _adaptive_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ev: _E
     variance per degree of freedom (so the prior matches how the board actually moved).
     Adapting rounds take at most two LM iterations; a last LM run converges."""
     total = 0
-    rounds = options.motion_prior_rounds if options.adapt_motion_prior else 0
+    adapting = options.adapt_motion_prior or options.adapt_angle_sigma
+    rounds = options.motion_prior_rounds if adapting else 0
     for _ in range(rounds):
         values, iterations, _error = _levenberg_marquardt(graph, values, options,
                                                                 progress, max_iterations=2,
@@ -476,16 +494,29 @@ def _adaptive_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ev: _E
         total += iterations
         ev._read(values)
         ratio = float(np.clip(ev.motion_chi2_per_dof(), 1e-3, 1e3))
+        if not options.adapt_motion_prior:
+            ratio = 1.0
         # a model misfit shows up as board jitter: never loosen the prior beyond the cap
         ratio = min(ratio, options.max_psd_factor / ev.motion_scale**-2)
         # nor stiffen it below the floor: a real board's motion is not exactly WNOA, and an
         # over-stiff prior trades the station's accuracy for smoothness
         ratio = max(ratio, options.min_psd_factor / ev.motion_scale**-2)
+        # the diodes' noise from the residuals (robust: MAD), never below the configured
+        # sigma (the 2 MHz quantisation) nor above max_sigma_factor times it
+        sigma = options.angle_sigma_rad / ev.bearing_scale
+        sigma_hat = 1.4826 * float(np.median(np.abs(ev.r)))
+        noise = 1.0
+        if options.adapt_angle_sigma:
+            noise = float(np.clip(sigma_hat, options.angle_sigma_rad,
+                                  options.max_sigma_factor * options.angle_sigma_rad) / sigma)**2
         if progress:
-            progress(f"motion prior: chi2/dof {ratio:.3g}")
-        if 0.8 < ratio < 1.25:  # the prior matches the motion (or sits at its bound)
+            progress(f"motion prior: chi2/dof {ratio:.3g}; angle noise {sigma_hat * 1e6:.1f}"
+                     " urad")
+        matched = 0.8 < ratio < 1.25 and 0.8 < noise < 1.25
+        if matched:  # prior and noise match the data (or sit at their bounds)
             break
         ev.scale_motion_prior(ratio)
+        ev.scale_bearing_noise(noise)
     values, iterations, error = _levenberg_marquardt(graph, values, options, progress,
                                                           history=ev.error_history)
     return values, total + iterations, error
@@ -550,7 +581,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
             warnings.append(f"station {sid}: weak link to the reference (position sigma "
                             f"{sigma_m * 1e3:.0f} mm); the board was rarely seen by both")
     h = problem.hits
-    z = np.abs(ev.r) / (options.angle_sigma_rad * options.huber_k)
+    z = np.abs(ev.r) / (ev.angle_sigma(options) * options.huber_k)
     weight = 1.0 / (1.0 + z**2) if options.loss == "cauchy" else np.minimum(1.0, 1.0 / z)
     rows = problem.hit_rows
     residuals = Residuals(angles.time[rows], angles.lighthouse[rows], h.axis,
@@ -568,5 +599,6 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         warnings=warnings,
         error_history=ev.error_history,
         diagnostics={"accel_psd_rot": ev.motion_psd()[0], "accel_psd_pos": ev.motion_psd()[1],
-                     "motion_chi2_per_dof": ev.motion_chi2_per_dof()},
+                     "motion_chi2_per_dof": ev.motion_chi2_per_dof(),
+                     "angle_sigma_rad": ev.angle_sigma(options)},
     )

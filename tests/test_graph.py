@@ -120,3 +120,17 @@ def test_three_and_four_stations(tmp_path):
     three = sim.angles.select(sim.angles.lighthouse != 3)
     result3 = solve_graph(sim.board, three)
     assert sorted(result3.stations.indices()) == [0, 1, 2]
+
+
+def test_angle_noise_is_learned_from_the_residuals():
+    """With 70 urad of extra Gaussian noise the solver raises its per-diode sigma to the
+    residuals' robust spread, so the robust loss keeps the normal hits and the covariance
+    widens; with quantisation noise only it stays at the configured floor."""
+    noisy = _capture("default", angle_sigma_rad=7e-5)
+    result = solve_graph(noisy.board, noisy.angles)
+    sigma = result.diagnostics["angle_sigma_rad"]
+    assert 6.5e-5 < sigma < 9e-5
+    assert result.residuals.inlier_fraction() > 0.97
+    clean = _capture("default")
+    assert solve_graph(clean.board, clean.angles).diagnostics["angle_sigma_rad"] == (
+        GraphOptions().angle_sigma_rad)
