@@ -33,7 +33,7 @@ from lhgraph.angles import Angles, load_angles
 from lhgraph.baseline import solve_paper
 from lhgraph.board import Board, load_board
 from lhgraph.errors import LhgraphError
-from lhgraph.graph import solve_graph
+from lhgraph.graph import GraphOptions, solve_graph
 from lhgraph.hive import align_to_mocap, import_hive, tracker_board_poses
 from lhgraph.metrics import station_errors
 from lhgraph.model import Convention, StationModel
@@ -47,6 +47,10 @@ BAG = REPO.parent / "shared/data/hive-env8/data8.11.bag"
 CONVENTIONS = {f"gib {g:+d}, curve {c:+d}": Convention(g, c) for g in (1, -1) for c in (1, -1)}
 
 
+# inlier fractions compare models only at one fixed per-diode sigma (40 urad)
+FIXED_SIGMA = GraphOptions(adapt_angle_sigma=False)
+
+
 def run(method: str, board: Board, angles: Angles, models: dict[int, StationModel]
         ) -> tuple[SolveResult | None, float, str]:
     """Solve with ``method`` (graph, graph+tracker-init, paper): (result, seconds, error)."""
@@ -56,9 +60,9 @@ def run(method: str, board: Board, angles: Angles, models: dict[int, StationMode
             result = solve_paper(board, angles, models)
         elif method == "graph+tracker-init":
             with mock.patch("lhgraph.graph.board_poses", tracker_board_poses):
-                result = solve_graph(board, angles, models)
+                result = solve_graph(board, angles, models, FIXED_SIGMA)
         else:
-            result = solve_graph(board, angles, models)
+            result = solve_graph(board, angles, models, FIXED_SIGMA)
     except LhgraphError as e:
         return None, time.perf_counter() - tic, str(e)
     return result, time.perf_counter() - tic, ""
