@@ -6,8 +6,6 @@ the repository: it has no licence) and are skipped when it is absent.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -21,24 +19,19 @@ from lhgraph.hive import (
     HIVE_MAPPING,
     AxisMapping,
     check_mappings,
-    import_hive,
     read_hive_bag,
 )
 from lhgraph.trajectory import load_trajectory
 
-BAG = Path(__file__).resolve().parents[1].parent / "shared/data/hive-env8/data8.11.bag"
-needs_bag = pytest.mark.skipif(not BAG.exists(), reason=f"hive recording not found at {BAG}")
+
+@pytest.fixture(scope="module")
+def imported(hive_import):
+    return hive_import
 
 
 @pytest.fixture(scope="module")
-def imported(tmp_path_factory):
-    out = tmp_path_factory.mktemp("hive")
-    return import_hive(BAG, out), out
-
-
-@pytest.fixture(scope="module")
-def bag():
-    return read_hive_bag(BAG)
+def bag(hive_bag):
+    return read_hive_bag(hive_bag)
 
 
 def test_axis_mapping_apply_and_labels():
@@ -51,7 +44,6 @@ def test_axis_mapping_apply_and_labels():
     assert len({c.label for c in CANDIDATE_MAPPINGS}) == 8
 
 
-@needs_bag
 def test_import_writes_valid_contract_files(imported):
     result, out = imported
     angles = load_angles(out / "angles.csv")
@@ -76,7 +68,6 @@ def test_import_writes_valid_contract_files(imported):
     assert abs(np.linalg.norm([imu[k][:50].mean() for k in ("ax", "ay", "az")]) - 9.8) < 0.3
 
 
-@needs_bag
 def test_import_rates(imported):
     result, _ = imported
     assert result.n_sensors == 24 and len(result.serials) == 2
@@ -87,7 +78,6 @@ def test_import_rates(imported):
     assert "stations: 2" in result.summary()
 
 
-@needs_bag
 def test_verified_axis_mapping_is_best(bag):
     checks = {c.mapping.label: c for c in check_mappings(bag, n_pairs=24)}
     best = checks[HIVE_MAPPING.label]
@@ -104,20 +94,18 @@ def test_verified_axis_mapping_is_best(bag):
             assert c.facing < 0.1, label
 
 
-@needs_bag
-def test_refuses_to_overwrite_without_force(imported, capsys):
+def test_refuses_to_overwrite_without_force(imported, hive_bag, capsys):
     _, out = imported
     before = (out / "angles.csv").stat().st_mtime_ns
-    assert main(["import", "hive", str(BAG), "--output", str(out)]) == 2
+    assert main(["import", "hive", str(hive_bag), "--output", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "exists already" in err[0]
     assert (out / "angles.csv").stat().st_mtime_ns == before
 
 
-@needs_bag
-def test_cli_force_overwrites(tmp_path, capsys):
+def test_cli_force_overwrites(tmp_path, hive_bag, capsys):
     (tmp_path / "angles.csv").write_text("old\n")
-    assert main(["import", "hive", str(BAG), "-o", str(tmp_path), "--force", "--quiet"]) == 0
+    assert main(["import", "hive", str(hive_bag), "-o", str(tmp_path), "--force", "--quiet"]) == 0
     assert load_angles(tmp_path / "angles.csv").stations() == [0, 1]
 
 

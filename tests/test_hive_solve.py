@@ -18,8 +18,6 @@ copied into the repository); the real-data tests skip when it is absent. Bounds 
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -29,7 +27,6 @@ from lhgraph.graph import solve_graph
 from lhgraph.hive import (
     align_to_mocap,
     facing_fraction,
-    import_hive,
     tracker_board_poses,
 )
 from lhgraph.pnp import board_poses
@@ -38,14 +35,10 @@ from lhgraph.trajectory import Trajectory, load_trajectory
 from lhgraph.transforms import make_pose, pose_from_quat, se3_exp
 from lhgraph.window import moving_window
 
-BAG = Path(__file__).resolve().parents[1].parent / "shared/data/hive-env8/data8.11.bag"
-needs_bag = pytest.mark.skipif(not BAG.exists(), reason=f"hive recording not found at {BAG}")
-
 
 @pytest.fixture(scope="module")
-def hive(tmp_path_factory):
-    out = tmp_path_factory.mktemp("hive_solve")
-    import_hive(BAG, out)
+def hive(hive_import):
+    _, out = hive_import
     board, angles = load_board(out / "board.toml"), load_angles(out / "angles.csv")
     return board, moving_window(angles, 8.0), load_trajectory(out / "mocap.csv")
 
@@ -56,14 +49,12 @@ def solved(hive):
     return solve_graph(board, angles)
 
 
-@needs_bag
 def test_window_starts_when_the_tracker_moves(hive):
     _, angles, mocap = hive
     assert 3.0 < angles.time.min() < 5.0  # OptiTrack: still until ~3.5 s, moving from ~4 s
     assert angles.time.max() - angles.time.min() == pytest.approx(8.0, abs=0.05)
 
 
-@needs_bag
 def test_pnp_poses_face_the_station(hive):
     """A photodiode sees only stations in front of it: hit sensors must face the station.
     The planar initialiser once put them all backwards on the curved tracker (mirror poses)."""
@@ -80,19 +71,16 @@ def test_pnp_poses_face_the_station(hive):
     assert np.mean(facing == 1) > 0.9
 
 
-@needs_bag
 def test_graph_residuals_on_real_data(solved):
     assert solved.residuals.rms_urad() < 300
     assert solved.residuals.inlier_fraction() > 0.75
 
 
-@needs_bag
 def test_stations_at_a_plausible_distance(solved):
     p = solved.stations.stations[1].T_world_lh[:3, 3]
     assert 2.0 < np.linalg.norm(p) < 4.0
 
 
-@needs_bag
 def test_trajectory_matches_optitrack(hive, solved):
     al = align_to_mocap(solved.trajectory, hive[2])
     assert len(al.time) > 500
