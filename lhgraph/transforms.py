@@ -39,13 +39,26 @@ def so3_exp(omega: ArrayLike) -> Array:
 
 
 def so3_log(R: ArrayLike) -> Array:
-    """Rotation vectors ``(..., 3)`` (rad) of rotation matrices ``(..., 3, 3)``."""
-    q = matrix_to_quat(R)  # w >= 0: angle in [0, pi]
-    w, v = q[..., 0], q[..., 1:]
-    s = np.linalg.norm(v, axis=-1)
-    angle = 2.0 * np.arctan2(s, w)
-    scale = np.where(s < 1e-12, 2.0 / np.maximum(w, 1e-12), angle / np.maximum(s, 1e-300))
-    return v * scale[..., None]
+    """Rotation vectors ``(..., 3)`` (rad) of rotation matrices ``(..., 3, 3)``.
+
+    From the trace and the skew part; within 1e-3 rad of 180 degrees (where that loses
+    precision) from the quaternion instead.
+    """
+    R = np.asarray(R, dtype=float)
+    c = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    theta = np.arccos(c)
+    w = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0],
+                  R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    small = theta < 1e-4
+    scale = np.where(small, 0.5 + theta**2 / 12.0,
+                     theta / (2.0 * np.sin(np.where(small, 1.0, theta))))
+    out = w * scale[..., None]
+    near_pi = theta > np.pi - 1e-3
+    if np.any(near_pi):
+        q = matrix_to_quat(R[near_pi])  # w >= 0: angle in [0, pi]
+        s = np.linalg.norm(q[..., 1:], axis=-1)
+        out[near_pi] = q[..., 1:] * (2.0 * np.arctan2(s, q[..., 0]) / s)[..., None]
+    return out
 
 
 def so3_left_jacobian(omega: ArrayLike) -> Array:
