@@ -95,6 +95,7 @@ class StreamingSolver:
         self._k = 0  # next state index
         self._last: tuple[float, Array, Array] | None = None  # time, pose, twist of last state
         self._psd = (self.options.accel_psd_rot, self.options.accel_psd_pos)
+        self._sigma = self.options.angle_sigma_rad  # the warm-up solve's learned value later
 
     def add(self, chunk: Angles) -> StreamingEstimate | None:
         """Add the hits of one or more complete sync cycles; returns the current estimate
@@ -127,6 +128,7 @@ class StreamingSolver:
         batch = solve_graph(self.board, data, self.models, options)
         self._psd = (batch.diagnostics.get("accel_psd_rot", self._psd[0]),
                      batch.diagnostics.get("accel_psd_pos", self._psd[1]))
+        self._sigma = batch.diagnostics.get("angle_sigma_rad", self._sigma)
         params = gtsam.ISAM2Params()  # gtsam's defaults (relinearise > 0.1, every 10th
         # update) measured faster here than relinearising every update: 12 vs 18 ms mean
         self._smoother = gtsam.IncrementalFixedLagSmoother(self.lag_s, params)
@@ -185,7 +187,7 @@ class StreamingSolver:
             sweep = BearingHits(np.zeros(b - a, dtype=np.int64), h.station[a:b], h.s_board[a:b],
                                 h.axis[a:b], h.dt[a:b], h.angle[a:b])
             noise = gtsam.noiseModel.Robust.Create(
-                huber, gtsam.noiseModel.Isotropic.Sigma(int(b - a), self.options.angle_sigma_rad))
+                huber, gtsam.noiseModel.Isotropic.Sigma(int(b - a), self._sigma))
             keys = [X(k), V(k), B(k)] + ([L(slot)] if slot > 0 else [])
             graph.add(gtsam.CustomFactor(noise, keys, _bearing_error(
                 sweep, k, slot, problem.models[slot])))
