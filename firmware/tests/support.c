@@ -128,3 +128,16 @@ size_t reference_image(const lhcap_header_t *tmpl, const uint32_t *samples, size
     lhb_put_le32(out + pos, lhb_crc32(out, pos));
     return pos + 4;
 }
+
+void test_fill_samples(uint32_t *samples, size_t n, uint32_t seed, uint32_t start,
+                       uint32_t one_in)
+{
+    uint32_t rng = seed;
+    uint32_t w = start;
+    for (size_t i = 0; i < n; i++) {
+        if (test_rand(&rng) % one_in == 0) {
+            w ^= 1u << (test_rand(&rng) % 32);
+        }
+        samples[i] = w;
+    }
+}

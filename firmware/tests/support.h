@@ -44,6 +44,11 @@ void send_request(lhb_proto_t *p, uint8_t type, uint8_t seq, const uint8_t *payl
 /* Pseudo-random generator for tests (xorshift32). */
 uint32_t test_rand(uint32_t *state);
 
+/* Fill n port words starting from `start`, flipping one random bit with probability
+ * 1/one_in per sample (a reproducible stream of edges from `seed`). */
+void test_fill_samples(uint32_t *samples, size_t n, uint32_t seed, uint32_t start,
+                       uint32_t one_in);
+
 /* Reference .lhcap image of the given samples (independent implementation). Returns its
  * size; out must hold 108 + 8 * n_samples + 4 bytes. */
 size_t reference_image(const lhcap_header_t *tmpl, const uint32_t *samples, size_t n,

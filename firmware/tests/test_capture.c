@@ -23,14 +23,7 @@ static void run_poll_until_ready(lhb_capture_t *c, uint32_t now)
 
 int main(void)
 {
-    uint32_t rng = 3;
-    uint32_t w = 0;
-    for (size_t i = 0; i < NS; i++) {
-        if (test_rand(&rng) % 20 == 0) {
-            w ^= 1u << (test_rand(&rng) % 32);
-        }
-        samples[i] = w;
-    }
+    test_fill_samples(samples, NS, 3, 0, 20);
     fake_hw_t fake;
     lhb_hw_t hw = fake_hw_hooks(&fake);
     lhcap_header_t t;

@@ -53,14 +53,7 @@ static void arm_req(uint8_t *p, uint32_t dur, uint32_t delay, uint64_t host)
 
 int main(void)
 {
-    uint32_t rng = 11;
-    uint32_t w = 0xF0;
-    for (size_t i = 0; i < NS; i++) {
-        if (test_rand(&rng) % 10 == 0) {
-            w ^= 1u << (test_rand(&rng) % 32);
-        }
-        samples[i] = w;
-    }
+    test_fill_samples(samples, NS, 11, 0xF0, 10);
     fake_hw_t fake;
     lhb_hw_t hw = fake_hw_hooks(&fake);
     lhcap_header_t t;
