@@ -19,19 +19,25 @@ static void enc_close_group(lhb_cobs_enc_t *e)
     }
 }
 
+/* Close the current group and reserve the code byte of the next one. */
+static void enc_next_group(lhb_cobs_enc_t *e)
+{
+    enc_close_group(e);
+    if (e->pos >= e->cap) {
+        e->overflow = true;
+        return;
+    }
+    e->code_pos = e->pos++;
+    e->code = 1;
+}
+
 void lhb_cobs_enc_put(lhb_cobs_enc_t *e, uint8_t byte)
 {
     if (e->overflow) {
         return;
     }
     if (byte == 0u) {
-        enc_close_group(e);
-        if (e->pos >= e->cap) {
-            e->overflow = true;
-            return;
-        }
-        e->code_pos = e->pos++;
-        e->code = 1;
+        enc_next_group(e);
         return;
     }
     if (e->pos >= e->cap) {
@@ -41,13 +47,7 @@ void lhb_cobs_enc_put(lhb_cobs_enc_t *e, uint8_t byte)
     e->out[e->pos++] = byte;
     e->code++;
     if (e->code == 0xFFu) { /* full group: 254 data bytes, no implied zero */
-        enc_close_group(e);
-        if (e->pos >= e->cap) {
-            e->overflow = true;
-            return;
-        }
-        e->code_pos = e->pos++;
-        e->code = 1;
+        enc_next_group(e);
     }
 }
 
