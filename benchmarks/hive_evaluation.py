@@ -14,8 +14,10 @@ Imports ``data8.11.bag`` (read from ../shared, never copied) into a temporary fo
    (:func:`lhgraph.hive.align_to_mocap`).
 
 The graph runs twice: with its own initialiser (``lhgraph.pnp.board_poses``) and with the
-non-planar PnP (:func:`lhgraph.hive.tracker_board_poses`) swapped in, because the planar
-initialiser lands in mirror poses on the curved tracker (docs/hive.md). Writes the markdown
+non-planar PnP (:func:`lhgraph.hive.tracker_board_poses`) swapped in. The planar initialiser
+used to land in mirror poses on the curved tracker; since it fits the plane of the seen
+sensors both give the same solution (docs/results/hive_evaluation.md), so the second run is
+a cross-check of the initialiser. Writes the markdown
 to ``--output`` (default docs/results/hive_evaluation.md) and prints it.
 """
 
