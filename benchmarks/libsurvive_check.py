@@ -25,7 +25,8 @@ from lhgraph.decode import decode_file
 from lhgraph.fileio import check_writable
 from lhgraph.graph import solve_graph
 from lhgraph.libsurvive import read_libsurvive_board, read_libsurvive_poses
-from lhgraph.model import Convention, StationModel
+from lhgraph.model import Convention
+from lhgraph.solve import models_of
 from lhgraph.transforms import inverse, rotation_angle
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -60,9 +61,7 @@ def main() -> int:
         (f"OOTX, gib {g:+.0f}, curve {c:+.0f}", Convention(g, c))
         for g in (1.0, -1.0) for c in (1.0, -1.0)]
     for name, convention in variants:
-        models = None if convention is None else {
-            k: StationModel(c.calibration, convention=convention)
-            for k, c in decoded.calibrations.items()}
+        models = None if convention is None else models_of(decoded.calibrations, convention)
         tic = time.perf_counter()
         result = solve_graph(board, decoded.angles, models)
         seconds = time.perf_counter() - tic

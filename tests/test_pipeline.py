@@ -11,8 +11,8 @@ from lhgraph.capture import read_capture
 from lhgraph.capture_sim import write_simulated_capture
 from lhgraph.decode import decode_capture
 from lhgraph.graph import solve_graph
-from lhgraph.model import StationModel
 from lhgraph.simulate import load_simulation_config, simulate
+from lhgraph.solve import models_of
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "simulation" / "realistic.toml"
 
@@ -27,7 +27,7 @@ def test_capture_decode_solve(tmp_path):
     assert not warnings
     decoded = decode_capture(capture)
     assert set(decoded.calibrations) == {0, 1}  # OOTX frames came through the sync widths
-    models = {k: StationModel(c.calibration) for k, c in decoded.calibrations.items()}
+    models = models_of(decoded.calibrations)
     result = solve_graph(sim.board, decoded.angles, models)
     truth = sim.truth.relative_to_reference()
     err = np.linalg.norm(result.stations.pose(1)[:3, 3] - truth.pose(1)[:3, 3])

@@ -10,7 +10,7 @@ from lhgraph.board import load_board
 from lhgraph.decode import decode_file
 from lhgraph.graph import solve_graph
 from lhgraph.libsurvive import read_libsurvive_board, read_libsurvive_poses
-from lhgraph.model import StationModel
+from lhgraph.solve import models_of
 from lhgraph.transforms import inverse, rotation_angle
 
 FIXTURE = Path(__file__).resolve().parent / "data" / "libsurvive" / "lh1_test_cal_hmd_7s.rec.gz"
@@ -20,7 +20,7 @@ def test_graph_agrees_with_libsurvive_on_real_data():
     decoded, _ = decode_file(FIXTURE, "libsurvive", device="HMD")
     board = load_board(FIXTURE.parent / "hmd_board.toml")  # the fixture has no CONFIG line
     assert len(board.ids) == 32
-    models = {k: StationModel(c.calibration) for k, c in decoded.calibrations.items()}
+    models = models_of(decoded.calibrations)
     result = solve_graph(board, decoded.angles, models)
     ls = read_libsurvive_poses(Path(str(FIXTURE) + ".json"))
     ours, theirs = result.stations.pose(1), inverse(ls[1]) @ ls[0]
