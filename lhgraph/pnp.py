@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .model import IDEAL, StationModel, predict
+from .model import IDEAL, StationModel, sweep_angle
 from .transforms import make_pose, se3_exp, so3_exp
 
 Array = NDArray[np.float64]
@@ -117,7 +117,7 @@ def _refine(
         w = np.minimum(1.0, huber_rad / np.maximum(np.abs(r), 1e-15))
         Hw = H * w[..., None]
         offsets = np.r_[0, np.cumsum(counts[act])[:-1]]
-        JtJ = np.add.reduceat(np.einsum("eai,eaj->eij", Hw, H), offsets, axis=0)
+        JtJ = np.add.reduceat(np.swapaxes(Hw, 1, 2) @ H, offsets, axis=0)
         Jtr = np.add.reduceat(np.einsum("eai,ea->ei", Hw, r), offsets, axis=0)
         # degenerate views (a sensor on a rotor axis, too few sensors) must not stop the rest
         bad = ~(np.isfinite(JtJ).all(axis=(1, 2)) & np.isfinite(Jtr).all(axis=1))
@@ -140,13 +140,20 @@ def _refine(
 def _residuals(T_lh_board: Array, s: Array, z: Array, model: StationModel,
                jacobians: bool = False) -> Array | tuple[Array, Array]:
     """Azimuth and elevation residuals (E, 2) of sensors ``s`` at poses ``T_lh_board`` (E, ...)
-    against measured ``z`` (E, 2), with board-pose Jacobians (E, 2, 6) when asked."""
-    out = [predict(np.eye(4), T_lh_board, s, np.full(len(s), axis), model, jacobians=jacobians)
-           for axis in (0, 1)]
+    against measured ``z`` (E, 2), with board-pose Jacobians (E, 2, 6) when asked (right
+    perturbations ``[omega, v]``, as :func:`lhgraph.model.predict`)."""
+    R = T_lh_board[..., :3, :3]
+    p = np.einsum("eij,ej->ei", R, s) + T_lh_board[..., :3, 3]
+    p2 = np.concatenate([p, p])
+    axis = np.repeat(np.array([0, 1]), len(s))
     if not jacobians:
-        return np.stack(out, axis=1) - z
-    r = np.stack([o[0] for o in out], axis=1) - z
-    return r, np.stack([o[2] for o in out], axis=1)
+        return sweep_angle(p2, axis, model).reshape(2, -1).T - z
+    angle, J_p = sweep_angle(p2, axis, model, jacobian=True)
+    r = angle.reshape(2, -1).T - z
+    # d p / d xi_board = R [-[s]x, I]  ->  [s x J_b, J_b] with J_b = J_p R
+    J_b = (J_p.reshape(2, -1, 1, 3) @ R)[:, :, 0, :]
+    H = np.concatenate([np.cross(s, J_b), J_b], axis=-1)
+    return r, np.swapaxes(H, 0, 1)
 
 
 def _facing(T_lh_board: Array, positions: Array, normals: Array,

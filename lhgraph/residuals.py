@@ -80,14 +80,17 @@ def bearing_residuals(
     (first order in ``dt V``: over the < 0.2 ms spread of one sweep the neglected term is
     below 1e-8 m); Jacobians are exact for this model.
     """
-    # station-from-board transform per (state, station) pair, gathered per hit
-    R_l = np.swapaxes(L[:, :3, :3], 1, 2)
+    # station-from-board transform of every (state, station) pair (far fewer than hits),
+    # gathered per hit
+    R_l = np.swapaxes(L[:, :3, :3], 1, 2)                                  # (S, 3, 3)
+    R_pair = R_l[None] @ X[:, None, :3, :3]                                 # (K, S, 3, 3)
+    t_pair = np.einsum("sij,ksj->ksi", R_l, X[:, None, :3, 3] - L[None, :, :3, 3])
+    R_lb = R_pair[hits.state, hits.station]
+    t_lb = t_pair[hits.state, hits.station]
     Vh = V[hits.state]
     s_board = hits.s_board
     s_moved = s_board + hits.dt[:, None] * (np.cross(Vh[:, :3], s_board) + Vh[:, 3:])
-    R_lb = R_l[hits.station] @ X[hits.state, :3, :3]
-    t_lb = (R_l[hits.station] @ (X[hits.state, :3, 3] - L[hits.station, :3, 3])[..., None])[..., 0]
-    p_lh = (R_lb @ s_moved[..., None])[..., 0] + t_lb
+    p_lh = np.einsum("nij,nj->ni", R_lb, s_moved) + t_lb
     n = len(hits.angle)
     r = np.empty(n)
     J_p = np.empty((n, 3)) if jacobians else None
