@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .transforms import cross
+
 Array = NDArray[np.float64]
 
 CALIBRATION_KEYS = ("phase", "tilt", "curve", "gibphase", "gibmag")
@@ -191,9 +193,9 @@ def predict(
     # p_lh = R_l^T (R_b s + t_b - t_l)
     # d p_lh / d xi_lh    = [ [p_lh]x , -I ]       -> J [p]x = J x p
     # d p_lh / d xi_board = R_lh_board [ -[s]x , I ] -> -J_b [s]x = s x J_b
-    H_lh = np.concatenate([np.cross(J_p, p_lh), -J_p], axis=-1)
+    H_lh = np.concatenate([cross(J_p, p_lh), -J_p], axis=-1)
     J_b = (J_p[..., None, :] @ R)[..., 0, :]
-    H_board = np.concatenate([np.cross(s, J_b), J_b], axis=-1)
+    H_board = np.concatenate([cross(s, J_b), J_b], axis=-1)
     return angle, H_lh, H_board
 
 

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .model import IDEAL, StationModel, sweep_angle
-from .transforms import make_pose, se3_exp, so3_exp
+from .transforms import cross, make_pose, se3_exp, so3_exp
 
 Array = NDArray[np.float64]
 
@@ -53,7 +53,7 @@ def _seen_planes(positions: Array, normals: Array, mask: NDArray[np.bool_]
     n_mean = (w @ normals) / count
     flip = np.sum(B[..., 2] * n_mean, axis=1) < 0
     B[flip, :, 2] *= -1
-    B[..., 1] = np.cross(B[..., 2], B[..., 0])  # right-handed
+    B[..., 1] = cross(B[..., 2], B[..., 0])  # right-handed
     return c, B
 
 
@@ -84,7 +84,7 @@ def _homography_poses(uv: Array, mask: NDArray[np.bool_], plane_xy: Array) -> Ar
     lam = 2.0 / (np.linalg.norm(h1, axis=1) + np.linalg.norm(h2, axis=1))
     lam *= np.where(h3[:, 2] < 0, -1.0, 1.0)
     r1, r2 = lam[:, None] * h1, lam[:, None] * h2
-    R = np.stack([r1, r2, np.cross(r1, r2)], axis=-1)
+    R = np.stack([r1, r2, cross(r1, r2)], axis=-1)
     U, _, Wt = np.linalg.svd(R)
     R = U @ Wt
     R[np.linalg.det(R) < 0] *= -1  # degenerate fits only; refined or rejected later
@@ -152,7 +152,7 @@ def _residuals(T_lh_board: Array, s: Array, z: Array, model: StationModel,
     r = angle.reshape(2, -1).T - z
     # d p / d xi_board = R [-[s]x, I]  ->  [s x J_b, J_b] with J_b = J_p R
     J_b = (J_p.reshape(2, -1, 1, 3) @ R)[:, :, 0, :]
-    H = np.concatenate([np.cross(s, J_b), J_b], axis=-1)
+    H = np.concatenate([cross(s, J_b), J_b], axis=-1)
     return r, np.swapaxes(H, 0, 1)
 
 
@@ -183,7 +183,7 @@ def _solve_candidates(
     n_lh = (T0[:, :3, :3] @ B[..., 2, None])[..., 0]
     d = T0[:, :3, 3] / np.linalg.norm(T0[:, :3, 3], axis=1, keepdims=True)
     n_alt = 2 * np.sum(n_lh * d, axis=1, keepdims=True) * d - n_lh
-    axis = np.cross(n_lh, n_alt)
+    axis = cross(n_lh, n_alt)
     angle = np.arctan2(np.linalg.norm(axis, axis=1), np.sum(n_lh * n_alt, axis=1))
     axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
     R_rot = so3_exp(axis * angle[:, None])

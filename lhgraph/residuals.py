@@ -15,9 +15,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .model import StationModel, sweep_angle
-from .transforms import inverse, se3_log, skew
+from .transforms import cross, inverse, se3_log, skew
 
 Array = NDArray[np.float64]
+_EYE6 = np.eye(6)
 
 
 def adjoint(T: Array) -> Array:
@@ -44,7 +45,7 @@ def right_jacobian_inverse(xi: Array) -> Array:
     """Inverse SE(3) right Jacobian (Logmap derivative), Bernoulli series to fourth order."""
     A = ad_matrix(xi)
     A2 = A @ A
-    return np.eye(6) + A / 2 + A2 / 12 - A2 @ A2 / 720
+    return _EYE6 + A / 2 + A2 / 12 - A2 @ A2 / 720
 
 
 @dataclass(frozen=True)
@@ -89,7 +90,7 @@ def bearing_residuals(
     t_lb = t_pair[hits.state, hits.station]
     Vh = V[hits.state]
     s_board = hits.s_board
-    s_moved = s_board + hits.dt[:, None] * (np.cross(Vh[:, :3], s_board) + Vh[:, 3:])
+    s_moved = s_board + hits.dt[:, None] * (cross(Vh[:, :3], s_board) + Vh[:, 3:])
     p_lh = np.einsum("nij,nj->ni", R_lb, s_moved) + t_lb
     n = len(hits.angle)
     r = np.empty(n)
@@ -106,11 +107,11 @@ def bearing_residuals(
     if not jacobians:
         return r, None, None, None
     # d p_lh / d xi_lh = [[p]x, -I];  d p_lh / d xi_X = R_lb [-[s']x, I]
-    H_L = np.concatenate([np.cross(J_p, p_lh), -J_p], axis=1)
+    H_L = np.concatenate([cross(J_p, p_lh), -J_p], axis=1)
     J_b = (J_p[:, None, :] @ R_lb)[:, 0, :]
-    H_X = np.concatenate([np.cross(s_moved, J_b), J_b], axis=1)
+    H_X = np.concatenate([cross(s_moved, J_b), J_b], axis=1)
     # d s' / d V = dt [-[s]x, I]
-    H_V = np.concatenate([np.cross(s_board, J_b), J_b], axis=1) * hits.dt[:, None]
+    H_V = np.concatenate([cross(s_board, J_b), J_b], axis=1) * hits.dt[:, None]
     return r, H_X, H_V, H_L
 
 
@@ -145,7 +146,7 @@ def motion_residuals(
     if not jacobians:
         return e, None
     K = len(dt)
-    eye = np.broadcast_to(np.eye(6), (K, 6, 6))
+    eye = np.broadcast_to(_EYE6, (K, 6, 6))
     zero = np.zeros((K, 6, 6))
     Jinv = right_jacobian_inverse(xi)
     H_X0 = np.concatenate([-Jinv @ adjoint(inverse(D)), zero], axis=1)

@@ -77,6 +77,22 @@ def _motion_error(k: int, dt: float) -> Callable:
     return error
 
 
+def _isam2_params() -> gtsam.ISAM2Params:
+    """iSAM2 settings: gtsam's defaults (relinearise variables that moved more than 0.1,
+    every 10th update), except that twists and sweep offsets are relinearised only beyond
+    1.0: the motion prior is linear in the twists and the bearing factors nearly so (they
+    see a twist only through the < 0.2 ms spread of a sweep), and linear in the offsets.
+    Relinearising them with the poses cost a 50 ms spike every 10th update (mean 7.8 ms
+    against 3.7 ms, same station estimate; ``benchmarks/graph_benchmark.py``)."""
+    params = gtsam.ISAM2Params()
+    thresholds = gtsam.ISAM2ThresholdMap()
+    for symbol, threshold in (("x", [0.1] * 6), ("l", [0.1] * 6), ("v", [1.0] * 6),
+                              ("b", [1.0])):
+        thresholds.insert((symbol, np.array(threshold)[:, None]))
+    params.setRelinearizeThreshold(thresholds)
+    return params
+
+
 class StreamingSolver:
     """Incremental calibration of the stations in ``station_ids`` (first = reference)."""
 
@@ -129,9 +145,7 @@ class StreamingSolver:
         self._psd = (batch.diagnostics.get("accel_psd_rot", self._psd[0]),
                      batch.diagnostics.get("accel_psd_pos", self._psd[1]))
         self._sigma = batch.diagnostics.get("angle_sigma_rad", self._sigma)
-        params = gtsam.ISAM2Params()  # gtsam's defaults (relinearise > 0.1, every 10th
-        # update) measured faster here than relinearising every update: 12 vs 18 ms mean
-        self._smoother = gtsam.IncrementalFixedLagSmoother(self.lag_s, params)
+        self._smoother = gtsam.IncrementalFixedLagSmoother(self.lag_s, _isam2_params())
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()

@@ -27,6 +27,18 @@ def test_exp_log_match_gtsam():
     np.testing.assert_allclose(se3_exp(np.zeros(6)), np.eye(4))
 
 
+def test_log_matches_gtsam_at_small_and_near_pi_angles():
+    rng = np.random.default_rng(1)
+    axes = rng.normal(size=(6, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    for angle in (0.0, 1e-9, 1e-5, 1e-4 * 0.99, 1e-4 * 1.01, 0.5, np.pi - 2e-3, np.pi - 1e-6):
+        xi = np.concatenate([axes * angle, rng.normal(size=(6, 3))], axis=1)
+        T = se3_exp(xi)
+        expected = np.array([gtsam.Pose3.Logmap(gtsam.Pose3(t)) for t in T])
+        np.testing.assert_allclose(se3_log(T), expected, atol=1e-7)
+        np.testing.assert_allclose(se3_exp(se3_log(T)), T, atol=1e-9)
+
+
 def test_inverse_and_quaternions():
     rng = np.random.default_rng(1)
     T = se3_exp(rng.normal(size=(5, 6)))
