@@ -162,19 +162,29 @@ def _station_paths(board: Board, angles: Angles, problem: GraphProblem
     return paths
 
 
-def _consistent_path(t: Array, T: Array, window: int = 7, max_jump_m: float = 0.15
-                     ) -> NDArray[np.bool_]:
+def _consistent_path(t: Array, T: Array, window: int = 7, max_jump_m: float = 0.15,
+                     max_turn_rad: float = 0.5) -> NDArray[np.bool_]:
     """Poses within ``max_jump_m`` of the running median position of their ``window``
-    neighbours (a board moves < 2 m/s; a wrong PnP twin or a fit to a handful of reflected
-    hits lands far away)."""
+    neighbours and within ``max_turn_rad`` of the rotation of most of them (a board moves
+    < 2 m/s and turns < 10 rad/s; a wrong PnP twin is turned, and a fit to a handful of
+    reflected hits lands far away)."""
     if len(t) < window:
         return np.ones(len(t), dtype=bool)
-    p = T[:, :3, 3]
     half = window // 2
+    p = T[:, :3, 3]
     padded = np.pad(p, ((half, half), (0, 0)), mode="edge")
     windows = np.lib.stride_tricks.sliding_window_view(padded, window, axis=0)
-    median = np.median(windows, axis=-1)
-    return np.linalg.norm(p - median, axis=1) < max_jump_m
+    near = np.linalg.norm(p - np.median(windows, axis=-1), axis=1) < max_jump_m
+    R = T[:, :3, :3]
+    agree = np.zeros(len(t), dtype=int)
+    for shift in range(1, half + 1):
+        # relative rotation angle to the neighbour ``shift`` steps later: cos = (tr - 1) / 2
+        cos = (np.einsum("kij,kij->k", R[:-shift], R[shift:]) - 1.0) / 2.0
+        close = cos > np.cos(max_turn_rad)
+        agree[:-shift] += close
+        agree[shift:] += close
+    neighbours = np.minimum(np.arange(len(t)), half) + np.minimum(np.arange(len(t))[::-1], half)
+    return near & (2 * agree >= neighbours)
 
 
 def _match_times(t_query: Array, t_ref: Array, max_gap_s: float) -> NDArray[np.bool_]:

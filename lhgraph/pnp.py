@@ -20,6 +20,9 @@ from .transforms import cross, make_pose, se3_exp, so3_exp
 
 Array = NDArray[np.float64]
 
+# Gauss-Newton iterations both mirror twins get before the better one is kept
+_CANDIDATE_ITERATIONS = 4
+
 # camera coordinates (X_c, Y_c, Z_c) = (y, z, x) of the station frame
 _P_CAM_LH = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 
@@ -191,14 +194,16 @@ def _solve_candidates(
     T1 = T0.copy()
     T1[:, :3, :3] = R_rot @ T0[:, :3, :3]
     T1[:, :3, 3] = c_lh - (T1[:, :3, :3] @ c[..., None])[..., 0]
-    Ta, rms_a, worst_a = _refine(T0, meas, mask, positions, model, iterations, huber_rad)
-    Tb, rms_b, worst_b = _refine(T1, meas, mask, positions, model, iterations, huber_rad)
+    # both twins get a few iterations, only the better one the rest
+    first = min(iterations, _CANDIDATE_ITERATIONS)
+    Ta, rms_a, _ = _refine(T0, meas, mask, positions, model, first, huber_rad)
+    Tb, rms_b, _ = _refine(T1, meas, mask, positions, model, first, huber_rad)
     # a seen sensor must face the station: that rejects the wrong twin on curved boards
     face_a = _facing(Ta, positions, normals, mask) > 0.8
     face_b = _facing(Tb, positions, normals, mask) > 0.8
     better_b = np.where(face_a == face_b, (rms_b < rms_a) | ~np.isfinite(rms_a), face_b)
-    return (np.where(better_b[:, None, None], Tb, Ta), np.where(better_b, rms_b, rms_a),
-            np.where(better_b[:, None], worst_b, worst_a))
+    T = np.where(better_b[:, None, None], Tb, Ta)
+    return _refine(T, meas, mask, positions, model, iterations - first, huber_rad)
 
 
 def board_poses(
