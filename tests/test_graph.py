@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from lhgraph.errors import SolverError
-from lhgraph.graph import GraphOptions, solve_graph
+from lhgraph.graph import GraphOptions, _consistent_path, solve_graph
 from lhgraph.metrics import station_errors
 from lhgraph.simulate import load_simulation_config, simulate
+from lhgraph.transforms import make_pose, so3_exp
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "simulation"
 
@@ -134,3 +135,15 @@ def test_angle_noise_is_learned_from_the_residuals():
     clean = _capture("default")
     assert solve_graph(clean.board, clean.angles).diagnostics["angle_sigma_rad"] == (
         GraphOptions().angle_sigma_rad)
+
+
+def test_consistent_path_drops_jumps_and_turned_twins():
+    t = np.arange(40) * 0.016
+    rot = so3_exp(np.stack([np.zeros(40), 2.0 * t, np.zeros(40)], axis=1))  # 2 rad/s turn
+    p = np.stack([0.5 * t, np.zeros(40), 2.0 + 0.1 * t], axis=1)
+    T = make_pose(rot, p)
+    T[10, :3, :3] = so3_exp([0.0, 0.0, 0.8]) @ T[10, :3, :3]  # a twin turned 46 deg
+    T[25, :3, 3] += [0.3, 0.0, 0.0]  # a pose 30 cm off the path
+    keep = _consistent_path(t, T)
+    assert not keep[10] and not keep[25]
+    assert keep.sum() == 38
