@@ -1,8 +1,9 @@
 """Factory-calibration files (``ootx.toml``): what a station broadcasts over OOTX.
 
 ``[lighthouses.K]`` with ``id`` (int), ``phase, tilt, curve, gibphase, gibmag`` as
-``[axis0, axis1]`` (rad) and ``accel_dir`` (3 ints, gravity direction in the station frame);
-K is the station index used in the angles CSV.
+``[axis0, axis1]`` (rad) and ``accel_dir`` (3 ints: the accelerometer at rest, i.e. up, in
+the station's native frame, :mod:`lhgraph.gravity`); K is the station index used in the
+angles CSV.
 """
 
 from __future__ import annotations

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from .calibration import StationCalibration
 from .capture import Capture, pulses_to_edges, write_capture
 from .decode import SYNC_BASE_S, SYNC_STEP_S
+from .gravity import accel_dir_from_up
 from .ootx import OotxPayload, encode_frame, pack_payload
 from .signal import LightPulses
 from .simulate import SimulatedCapture
@@ -50,8 +51,10 @@ class CaptureOptions:
 
 def default_calibrations(sim: SimulatedCapture) -> dict[int, StationCalibration]:
     """Each station's factory calibration from the simulator's truth; id ``0x1000 + index``,
-    gravity along the station's -z (``accel_dir = (0, 0, -127)``)."""
-    return {i: StationCalibration(s.model.calibration, 0x1000 + i, np.array([0.0, 0.0, -127.0]))
+    ``accel_dir`` from the scene's up vector (as an upright station would measure it)."""
+    up = np.asarray(sim.truth.extra["simulation"]["up"], dtype=float)
+    return {i: StationCalibration(s.model.calibration, 0x1000 + i,
+                                  accel_dir_from_up(s.T_world_lh[:3, :3].T @ up))
             for i, s in sim.truth.stations.items()}
 
 

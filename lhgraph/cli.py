@@ -92,6 +92,9 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--reference", type=int, help="station index of the world frame")
     p.add_argument("--duration", type=float, metavar="S",
                    help="solve only the first S seconds in which the board moves")
+    p.add_argument("--world", choices=("reference", "gravity"),
+                   help="world frame: the reference station's (default) or gravity-aligned, "
+                   "z up from the stations' OOTX accelerometer vectors")
     _add_common_output(p)
     return p
 
@@ -120,6 +123,8 @@ def run_solve(args: argparse.Namespace) -> int:
             setattr(config, key, Path(value) if key not in ("method", "reference") else value)
     if args.duration is not None:
         config.duration_s = args.duration
+    if args.world is not None:
+        config.world = args.world
     if config.output is None:
         raise InputError("no output: give --output or set 'output' in the config")
     progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))

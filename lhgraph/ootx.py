@@ -64,7 +64,7 @@ class OotxPayload:
                    accel_dir=(int(accel[0]), int(accel[1]), int(accel[2])), **fields)
 
     def to_calibration(self) -> StationCalibration:
-        """The factory calibration, id and gravity direction as an ootx.toml entry."""
+        """The factory calibration, id and accelerometer vector as an ootx.toml entry."""
         cal = FactoryCalibration(phase=self.phase, tilt=self.tilt, curve=self.curve,
                                  gibphase=self.gibphase, gibmag=self.gibmag)
         return StationCalibration(cal, self.id, np.asarray(self.accel_dir, dtype=float))

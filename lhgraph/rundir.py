@@ -246,7 +246,8 @@ def run_to_directory(config: SolveConfig, output: str | Path, overwrite: bool = 
     for method in methods:
         say(f"[{method}] solving")
         result = solve(inputs.board, inputs.angles, method, inputs.models, config.reference,
-                       config.graph, lambda msg, m=method: say(f"[{m}] {msg}"))
+                       config.graph, lambda msg, m=method: say(f"[{m}] {msg}"),
+                       world_up=inputs.world_up)
         errors = station_errors(truth, result.stations) if truth is not None else None
         summary = summarise(config, inputs, result, errors, hashes, load_s)
         folder = output if len(methods) == 1 else output / method

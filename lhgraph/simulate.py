@@ -514,7 +514,8 @@ def simulate(config: SimulationConfig, seed: int | None = None) -> SimulatedCapt
 
     t_traj = np.arange(int(config.duration_s * TRAJECTORY_RATE_HZ) + 1) / TRAJECTORY_RATE_HZ
     extra = {"simulation": {"seed": int(config.seed), "first_station": first,
-                            "clock_ppm": ppm, "rotor_period_s": period_s}}
+                            "clock_ppm": ppm, "rotor_period_s": period_s,
+                            "up": [float(x) for x in scene.up]}}
     truth = Stations(0, {i: Station(scene.T_world_lh[i], None, models[i]) for i in range(n)},
                      extra)
     return SimulatedCapture(angles, board, truth, Trajectory(t_traj, motion.pose(t_traj)),

@@ -12,12 +12,16 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from .angles import Angles, load_angles
 from .board import Board, load_board
 from .calibration import StationCalibration, load_calibration
 from .errors import InputError
 from .fileio import as_float, as_int, read_toml
 from .graph import GraphOptions, solve_graph
+from .gravity import to_gravity_world, up_vectors
 from .model import Convention, StationModel
 from .result import SolveResult
 from .stations import save_stations
@@ -27,6 +31,7 @@ if TYPE_CHECKING:
     from .baseline import PaperOptions
 
 METHODS = ("graph", "paper")
+WORLDS = ("reference", "gravity")
 
 
 def station_models(calibration_path: str | Path | None,
@@ -49,22 +54,29 @@ def solve(board: Board, angles: Angles, method: str = "graph",
           models: dict[int, StationModel] | None = None, reference: int | None = None,
           graph_options: GraphOptions | None = None,
           progress: Callable[[str], None] | None = None,
-          paper_options: PaperOptions | None = None) -> SolveResult:
-    """Calibrate the stations seen in ``angles`` with ``method`` ("graph" or "paper")."""
+          paper_options: PaperOptions | None = None,
+          world_up: dict[int, NDArray[np.float64]] | None = None) -> SolveResult:
+    """Calibrate the stations seen in ``angles`` with ``method`` ("graph" or "paper").
+
+    The world is the reference station's frame, or with ``world_up`` (station index -> up
+    vector in the station frame, :func:`lhgraph.gravity.up_vectors`) gravity-aligned.
+    """
     angles.check_board(board)
     if method == "graph":
         options = graph_options or GraphOptions()
         if reference is not None:
             options.reference = reference
-        return solve_graph(board, angles, models, options, progress)
-    if method == "paper":
+        result = solve_graph(board, angles, models, options, progress)
+    elif method == "paper":
         from .baseline import solve_paper
 
         staged = None if progress is None else (
             lambda stage, done, total: progress(f"{stage}: {done}/{total}"))
-        return solve_paper(board, angles, models, reference, paper_options, staged)
-    raise InputError(f"unknown method '{method}' (expected one of {', '.join(METHODS)})",
-                     where="--method")
+        result = solve_paper(board, angles, models, reference, paper_options, staged)
+    else:
+        raise InputError(f"unknown method '{method}' (expected one of {', '.join(METHODS)})",
+                         where="--method")
+    return result if world_up is None else to_gravity_world(result, world_up)
 
 
 def write_solution(result: SolveResult, output: str | Path, trajectory: str | Path | None,
@@ -84,7 +96,9 @@ class SolveConfig:
     capture (its OOTX calibration is used unless ``calibration`` is given). ``methods``
     (several methods, run directory output only) overrides ``method``; ``seed`` is recorded
     in a run directory's summary; ``path`` is the configuration file itself; ``duration_s``
-    keeps only that many seconds from the moment the board starts moving.
+    keeps only that many seconds from the moment the board starts moving; ``world`` is
+    ``"reference"`` (the reference station's frame) or ``"gravity"`` (z up from the stations'
+    OOTX accelerometer vectors, :mod:`lhgraph.gravity`).
     """
 
     board: Path
@@ -101,6 +115,7 @@ class SolveConfig:
     seed: int | None = None
     path: Path | None = None
     duration_s: float | None = None
+    world: str = "reference"
 
     def method_list(self) -> list[str]:
         """The methods to run, in order."""
@@ -109,12 +124,14 @@ class SolveConfig:
 
 @dataclass
 class SolveInputs:
-    """What a config's files hold: board, angles, station models, decoder report lines."""
+    """What a config's files hold: board, angles, station models, decoder report lines, and
+    the stations' up vectors when the config asks for a gravity-aligned world."""
 
     board: Board
     angles: Angles
     models: dict[int, StationModel]
     notes: list[str] = field(default_factory=list)
+    world_up: dict[int, NDArray[np.float64]] | None = None
 
 
 def parse_graph_options(table: Any, path: str | Path, where: str = "graph") -> GraphOptions:
@@ -149,7 +166,7 @@ def load_solve_config(path: str | Path) -> SolveConfig:
     data = read_toml(path)
     base = path.parent
     known = {"board", "angles", "output", "method", "calibration", "trajectory", "truth",
-             "reference", "graph", "capture", "methods", "seed", "duration"}
+             "reference", "graph", "capture", "methods", "seed", "duration", "world"}
     for key in data:
         if key not in known:
             raise InputError(f"unknown key '{key}' (known: {', '.join(sorted(known))})", path,
@@ -183,11 +200,14 @@ def load_solve_config(path: str | Path) -> SolveConfig:
     reference = as_int(data["reference"], path, "reference") if "reference" in data else None
     seed = as_int(data["seed"], path, "seed") if "seed" in data else None
     duration = as_float(data["duration"], path, "duration") if "duration" in data else None
+    world = data.get("world", "reference")
+    if world not in WORLDS:
+        raise InputError(f"expected one of {', '.join(WORLDS)}, got {world!r}", path, "world")
     return SolveConfig(
         board=a_path("board", True), angles=a_path("angles"), output=a_path("output"),
         method=method, calibration=a_path("calibration"), trajectory=a_path("trajectory"),
         truth=a_path("truth"), reference=reference, graph=graph, capture=a_path("capture"),
-        methods=methods, seed=seed, path=path, duration_s=duration,
+        methods=methods, seed=seed, path=path, duration_s=duration, world=world,
     )
 
 
@@ -195,7 +215,7 @@ def load_inputs(config: SolveConfig) -> SolveInputs:
     """Read the board, the angles (or decode the capture) and the station models."""
     board = load_board(config.board)
     notes: list[str] = []
-    models = station_models(config.calibration)
+    calibrations = load_calibration(config.calibration) if config.calibration else {}
     if config.capture is not None:
         from .decode import decode_file
 
@@ -203,7 +223,7 @@ def load_inputs(config: SolveConfig) -> SolveInputs:
         angles = decoded.angles
         notes = [*warnings, *decoded.report.lines()]
         if config.calibration is None:
-            models = models_of(decoded.calibrations)
+            calibrations = decoded.calibrations
         source: Path = config.capture
     elif config.angles is not None:
         angles = load_angles(config.angles)
@@ -217,7 +237,14 @@ def load_inputs(config: SolveConfig) -> SolveInputs:
         angles = moving_window(angles, config.duration_s)
         notes.append(f"solved {config.duration_s:g} s from the start of motion "
                      f"(t = {angles.time[0]:.3f} s)")
-    return SolveInputs(board, angles, models, notes)
+    world_up = None
+    if config.world == "gravity":
+        world_up = up_vectors(calibrations)
+        if not world_up:
+            raise InputError("world = 'gravity' needs the stations' accelerometer vectors "
+                             "(accel_dir in an ootx.toml, or a capture's OOTX): none given",
+                             config.calibration or config.capture or config.path, "world")
+    return SolveInputs(board, angles, models_of(calibrations), notes, world_up)
 
 
 def run_config(config: SolveConfig, progress: Callable[[str], None] | None = None
@@ -225,4 +252,4 @@ def run_config(config: SolveConfig, progress: Callable[[str], None] | None = Non
     """Load the inputs a config names and solve with its (first) method."""
     inputs = load_inputs(config)
     return solve(inputs.board, inputs.angles, config.method_list()[0], inputs.models,
-                 config.reference, config.graph, progress)
+                 config.reference, config.graph, progress, world_up=inputs.world_up)
