@@ -198,8 +198,9 @@ def _match_times(t_query: Array, t_ref: Array, max_gap_s: float) -> NDArray[np.b
 
 
 def initialise(board: Board, angles: Angles, problem: GraphProblem,
-               max_gap_s: float = 0.05) -> Initialisation:
-    """Initial values from per-station PnP paths and a weighted Kabsch on sensor points."""
+               max_gap_s: float = 0.05, velocity_span_s: float = 0.01) -> Initialisation:
+    """Initial values from per-station PnP paths and a weighted Kabsch on sensor points;
+    twists from the merged path's change over ``velocity_span_s``."""
     paths = _station_paths(board, angles, problem)
     t_ref, T_ref, _ = paths[0]
     if len(t_ref) < 2:
@@ -234,10 +235,11 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
     times, T_all = times[order], T_all[order]
     keep = np.r_[True, np.diff(times) > 0]
     X0 = interpolate_poses(times[keep], T_all[keep], problem.state_time)
-    V0 = np.zeros((problem.n_states, 6))
-    dt = np.diff(problem.state_time)
-    V0[:-1] = se3_log(inverse(X0[:-1]) @ X0[1:]) / dt[:, None]
-    V0[-1] = V0[-2] if len(V0) > 1 else 0.0
+    # twists by central differences over +-h on the merged path (states may be closer)
+    h = 0.5 * velocity_span_s
+    before = interpolate_poses(times[keep], T_all[keep], problem.state_time - h)
+    after = interpolate_poses(times[keep], T_all[keep], problem.state_time + h)
+    V0 = se3_log(inverse(before) @ after) / (2 * h)
     return Initialisation(L0, X0, V0, overlap)
 
 
@@ -536,17 +538,22 @@ def _optimise(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, problem: 
               ev: _Evaluator, options: GraphOptions, progress: Progress | None
               ) -> tuple[gtsam.Values, dict[int, Array], int, float]:
     """Batch solve; returns values, station covariances, iterations and final error."""
-    if options.solver == "lm":
-        result, iterations, error = _adaptive_lm(graph, values, ev, options, progress)
-    elif options.solver == "isam2":
-        result, iterations = _isam2(graph, values, options, progress)
-        result = gtsam.Values(result)
-        error = graph.error(result)
-    else:
+    if options.solver not in ("lm", "isam2"):
         raise SolverError(f"unknown solver '{options.solver}' (expected lm or isam2)")
-    marginals = gtsam.Marginals(graph.linearize(result), result)
-    cov = {slot: marginals.marginalCovariance(L(slot))
-           for slot in range(1, len(problem.station_ids))}
+    try:
+        if options.solver == "lm":
+            result, iterations, error = _adaptive_lm(graph, values, ev, options, progress)
+        else:
+            result, iterations = _isam2(graph, values, options, progress)
+            result = gtsam.Values(result)
+            error = graph.error(result)
+        marginals = gtsam.Marginals(graph.linearize(result), result)
+        cov = {slot: marginals.marginalCovariance(L(slot))
+               for slot in range(1, len(problem.station_ids))}
+    except RuntimeError as err:  # gtsam's IndeterminateLinearSystemException and kin
+        first = next((line.strip() for line in str(err).splitlines() if line.strip()), "")
+        raise SolverError(f"the linearised problem cannot be solved ({first}): some board "
+                          "state or station is not determined by the data") from err
     return result, cov, iterations, error
 
 

@@ -19,6 +19,7 @@ from .transforms import cross, inverse, se3_log, skew
 
 Array = NDArray[np.float64]
 _EYE6 = np.eye(6)
+MIN_PRIOR_DT_S = 1e-3  # shortest step the motion prior's covariance assumes (s)
 
 
 def adjoint(T: Array) -> Array:
@@ -119,10 +120,12 @@ def wnoa_covariance(dt: Array, qc_rot: float, qc_pos: float) -> Array:
     """Covariance ``(K, 12, 12)`` of the white-noise-on-acceleration prior over steps ``dt``.
 
     ``qc_rot`` (rad^2/s^3) and ``qc_pos`` (m^2/s^3) are the power spectral densities of the
-    angular and linear acceleration noise.
+    angular and linear acceleration noise. Steps shorter than ``MIN_PRIOR_DT_S`` count as that
+    long: two nearly simultaneous sweeps (stations whose time stamps overlap) would otherwise
+    get a near-singular covariance (``dt^3``) and an indeterminate linear system.
     """
     Qc = np.diag([qc_rot] * 3 + [qc_pos] * 3)
-    dt = np.asarray(dt, dtype=float)[:, None, None]
+    dt = np.maximum(np.asarray(dt, dtype=float), MIN_PRIOR_DT_S)[:, None, None]
     Q = np.zeros((dt.shape[0], 12, 12))
     Q[:, :6, :6] = dt**3 / 3 * Qc
     Q[:, :6, 6:] = dt**2 / 2 * Qc
