@@ -11,7 +11,9 @@ Imports ``data8.11.bag`` (read from ../shared, never copied) into a temporary fo
 2. graph vs paper baseline, without and with the best calibration: residuals, the second
    station's pose, its spread over the 8 s slices against the whole-bag solution;
 3. the board trajectory against OptiTrack after a world + hand-eye + time-offset alignment
-   (:func:`lhgraph.hive.align_to_mocap`).
+   (:func:`lhgraph.hive.align_to_mocap`);
+4. each station's own PnP path (one station, no graph) against OptiTrack, on the whole bag
+   and the first slice: what one station's view alone gives.
 
 The graph runs twice: with its own initialiser (``lhgraph.pnp.board_poses``) and with the
 non-planar PnP (:func:`lhgraph.hive.tracker_board_poses`) swapped in. The planar initialiser
@@ -35,10 +37,11 @@ from lhgraph.angles import Angles, load_angles
 from lhgraph.baseline import solve_paper
 from lhgraph.board import Board, load_board
 from lhgraph.errors import LhgraphError
-from lhgraph.graph import GraphOptions, solve_graph
+from lhgraph.graph import GraphOptions, consistent_path, solve_graph
 from lhgraph.hive import align_to_mocap, import_hive, tracker_board_poses
 from lhgraph.metrics import station_errors
 from lhgraph.model import Convention, StationModel
+from lhgraph.reconstruct import reconstruct_measurements
 from lhgraph.result import SolveResult
 from lhgraph.solve import station_models
 from lhgraph.trajectory import Trajectory, load_trajectory
@@ -180,6 +183,27 @@ def main() -> None:
                 lines.append(f"| {method}, {mname} | **rms over slices** | "
                              f"**{np.sqrt(np.mean(d[:, 0] ** 2)):.1f}** | "
                              f"**{np.sqrt(np.mean(d[:, 1] ** 2)):.3f}** | | |")
+    # 4. each station's own PnP path (no graph, no other station) against OptiTrack
+    lines += ["", "## Each station's own path vs OptiTrack", "",
+              "Per-measurement poses `T_lh_board` of one station alone "
+              "(`lhgraph.hive.tracker_board_poses` on the merged az/el pairs, path filter of the "
+              "graph initialiser), aligned like the trajectories above: how well each station's "
+              "view alone can give the path.", "",
+              "| span | station | poses | median rms µrad | RMSE mm | deg | time offset ms |",
+              "|---|---|---|---|---|---|---|"]
+    for sname in list(spans)[:2]:
+        for station in angles.stations():
+            one = data[sname].select(data[sname].lighthouse == station)
+            meas = reconstruct_measurements(one, board, "merge")
+            pnp = tracker_board_poses(meas.azimuth, meas.elevation, board.positions,
+                                      board.normals)
+            ok = pnp.valid
+            ok[ok] = consistent_path(meas.time[ok], pnp.T_lh_board[ok])
+            al = align_to_mocap(Trajectory(meas.time[ok], pnp.T_lh_board[ok]), mocap)
+            lines.append(f"| {sname} | {station} | {ok.sum()} | "
+                         f"{np.median(pnp.rms_rad[ok]) * 1e6:.1f} | {al.rmse_mm():.1f} | "
+                         f"{al.rmse_deg():.2f} | {al.time_offset_s * 1e3:+.1f} |")
+            print(lines[-1], flush=True)
     text = "\n".join(lines) + "\n"
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(text)

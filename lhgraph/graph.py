@@ -157,12 +157,12 @@ def _station_paths(board: Board, angles: Angles, problem: GraphProblem
         pnp = board_poses(meas.azimuth, meas.elevation, board.positions, board.normals,
                           problem.models[slot])
         ok = pnp.valid
-        ok[ok] = _consistent_path(meas.time[ok], pnp.T_lh_board[ok])
+        ok[ok] = consistent_path(meas.time[ok], pnp.T_lh_board[ok])
         paths.append((meas.time[ok], pnp.T_lh_board[ok], pnp.rms_rad[ok]))
     return paths
 
 
-def _consistent_path(t: Array, T: Array, window: int = 7, max_jump_m: float = 0.15,
+def consistent_path(t: Array, T: Array, window: int = 7, max_jump_m: float = 0.15,
                      max_turn_rad: float = 0.5) -> NDArray[np.bool_]:
     """Poses within ``max_jump_m`` of the running median position of their ``window``
     neighbours and within ``max_turn_rad`` of the rotation of most of them (a board moves

@@ -10,7 +10,7 @@ import pytest
 
 from lhgraph.angles import Angles
 from lhgraph.errors import SolverError
-from lhgraph.graph import GraphOptions, _consistent_path, solve_graph
+from lhgraph.graph import GraphOptions, consistent_path, solve_graph
 from lhgraph.metrics import station_errors
 from lhgraph.simulate import load_simulation_config, simulate
 from lhgraph.transforms import make_pose, so3_exp
@@ -145,7 +145,7 @@ def test_consistent_path_drops_jumps_and_turned_twins():
     T = make_pose(rot, p)
     T[10, :3, :3] = so3_exp([0.0, 0.0, 0.8]) @ T[10, :3, :3]  # a twin turned 46 deg
     T[25, :3, 3] += [0.3, 0.0, 0.0]  # a pose 30 cm off the path
-    keep = _consistent_path(t, T)
+    keep = consistent_path(t, T)
     assert not keep[10] and not keep[25]
     assert keep.sum() == 38
 
