@@ -6,12 +6,15 @@ Steps (paper §"Proposed Automatic Calibration Algorithm"):
    after removing the factory-calibration distortion when a model is given;
 2. per measurement, the board pose with the station at the origin: Nelder-Mead on
    ``K1 = ||C(L, P) - M||_F^2`` (:func:`estimate_board_pose`, :func:`estimate_board_poses`);
+   poses whose K1 residual is an outlier among the station's are dropped
+   (:func:`reject_outlier_poses`, ours, not the paper's);
 3. the reference ("master") station's board path; every other ("slave") station's path
    interpolated to the master's timestamps (:func:`interpolate_path`);
 4. weighted Kabsch superposition of the two paths -> initial ``T_ref_slave``
    (:func:`initial_station_pose`);
 5. Nelder-Mead on ``K2 = sum_n ||C(L, P_n) - M_n||_F^2`` over the slave's measurements with
-   the master path fixed (:func:`refine_station_pose`).
+   the master path fixed (:func:`refine_station_pose`), without the measurements dropped
+   in step 2.
 
 :func:`solve_paper` runs it all. Frames: ``T_lh_board`` maps board points (m) into a
 station frame (+x forward, +y left, +z up); the world is the reference station's frame.
@@ -23,11 +26,11 @@ from __future__ import annotations
 import math
 import time as _time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import minimize
+from scipy.optimize import OptimizeResult, minimize
 
 from .angles import Angles
 from .board import Board
@@ -60,6 +63,10 @@ class PaperOptions:
       better fit (warm starts included: without it they can follow the wrong branch).
     - ``min_sensors``: a measurement needs this many sensors with both angles.
     - ``min_measurements``: a station needs this many usable measurements.
+    - ``outlier_mads``: a board pose whose rms angle residual ``sqrt(K1 / (2 n_sensors))``
+      exceeds the median of its station's by more than this many robust standard deviations
+      (1.4826 x MAD) is dropped from the paths, the superposition and K2; K2 drops its own
+      outlier measurements likewise and is fitted again (``inf``: keep all, the paper).
     - ``kabsch_points``: ``"board"`` superposes the board centres (paper), ``"sensors"``
       every sensor position of every matched board pose.
     - ``weight_floor``: Kabsch weight ``w = 1 / (eps + e_master + e_slave)`` with ``e`` the
@@ -74,6 +81,7 @@ class PaperOptions:
     mirror_check: bool = True
     min_sensors: int = 6
     min_measurements: int = 10
+    outlier_mads: float = 5.0
     kabsch_points: str = "board"
     weight_floor: float = 0.1
     pose_xatol: float = 1e-6
@@ -93,6 +101,8 @@ class PaperOptions:
                              f"{', '.join(KABSCH_POINTS)})", where="kabsch_points")
         if self.min_sensors < 4:
             raise InputError("min_sensors must be >= 4", where="min_sensors")
+        if not self.outlier_mads > 0:
+            raise InputError("outlier_mads must be > 0", where="outlier_mads")
 
 
 @dataclass
@@ -319,6 +329,32 @@ def estimate_board_poses(meas: Measurements, board: Board, options: PaperOptions
     return BoardPoses(meas.lighthouse, meas.time.copy(), T, cost, n_used, valid, nfev)
 
 
+def outliers(values: ArrayLike, n_mads: float) -> NDArray[np.bool_]:
+    """Where ``values`` exceed their median by more than ``n_mads`` x 1.4826 x MAD (ours).
+
+    1.4826 x MAD is a robust standard deviation; ``n_mads = inf`` flags nothing.
+    """
+    v = np.asarray(values, dtype=float)
+    if len(v) == 0 or not math.isfinite(n_mads):
+        return np.zeros(len(v), dtype=bool)
+    median = float(np.median(v))
+    return v > median + n_mads * 1.4826 * float(np.median(np.abs(v - median)))
+
+
+def reject_outlier_poses(poses: BoardPoses, n_mads: float) -> BoardPoses:
+    """``poses`` with the fits whose K1 residual is an outlier marked invalid (ours).
+
+    A valid pose is rejected when its rms angle residual ``sqrt(K1 / (2 n_sensors))`` (rad)
+    is an :func:`outliers` among the station's valid poses. Such a fit explains its angles
+    far worse than the others: on the hive recording it comes from a stray sweep mixed into
+    a measurement with few sensors, and the pose is off by up to 1.7 m (docs/baseline.md).
+    Returns a copy.
+    """
+    keep = poses.valid.copy()
+    keep[keep] = ~outliers(np.sqrt(poses.mean_square()[keep]), n_mads)
+    return replace(poses, valid=keep)
+
+
 # --- paths, superposition, refinement -------------------------------------------------------------
 
 
@@ -385,7 +421,9 @@ def initial_station_pose(master: BoardPoses, slave: BoardPoses, board: Board,
 
 @dataclass
 class Refinement:
-    """Result of the K2 refinement of one station: pose, K2 (rad^2), calls, convergence."""
+    """Result of the K2 refinement of one station: pose, K2 (rad^2) over the measurements
+    kept, K2 calls and iterations summed over the fits, convergence of the last fit, the
+    measurements overlapping the reference path and how many of them were rejected."""
 
     T_ref_lh: Array
     cost: float
@@ -393,6 +431,26 @@ class Refinement:
     iterations: int
     converged: bool
     n_measurements: int
+    n_rejected: int = 0
+
+
+MAX_K2_FITS = 3
+"""K2 fits at most: all measurements, then refits without the outliers until they repeat."""
+
+
+def _minimise_station(world: Array, measured: Array, T0: Array, options: PaperOptions
+                      ) -> tuple[Array, OptimizeResult]:
+    """Nelder-Mead on K2 around ``T0`` (``R = Exp(omega) R0``, ``t = t0 + v``): the pose
+    ``T_ref_lh`` seeing the reference-frame points ``world`` (n, 3) at ``measured`` (n, 2)."""
+    R0, t0 = T0[:3, :3], T0[:3, 3]
+
+    def k2(x: Array) -> float:
+        return _angle_cost((world - (t0 + x[3:])) @ (_rotation(x[:3]) @ R0), measured)
+
+    res = minimize(k2, np.zeros(6), method="Nelder-Mead", options={
+        "xatol": options.refine_xatol, "fatol": options.refine_fatol,
+        "maxfev": options.refine_maxfev, "initial_simplex": _simplex(0.01, 0.01)})
+    return make_pose(_rotation(res.x[:3]) @ R0, t0 + res.x[3:]), res
 
 
 def refine_station_pose(T_ref_lh: ArrayLike, meas: Measurements, trajectory: Trajectory,
@@ -404,10 +462,13 @@ def refine_station_pose(T_ref_lh: ArrayLike, meas: Measurements, trajectory: Tra
     measurements (ideal angles), ``trajectory`` the reference board path ``T_ref_board``,
     fixed and interpolated to each measurement's time (measurements outside it or across
     gaps > ``max_gap_s``, default ``max_gap_periods`` x its typical spacing, are skipped).
-    Parameterised as ``R = Exp(omega) R0``, ``t = t0 + v``.
+    Parameterised as ``R = Exp(omega) R0``, ``t = t0 + v``. With a finite
+    ``options.outlier_mads`` (ours, not the paper's), measurements whose rms angle residual
+    at the fitted pose is an outlier (:func:`outliers`) are dropped and K2 is fitted again
+    from that pose, until the dropped set repeats (at most ``MAX_K2_FITS`` fits).
     """
     options = options or PaperOptions()
-    T0 = np.asarray(T_ref_lh, dtype=float)
+    T = np.asarray(T_ref_lh, dtype=float)
     if max_gap_s is None:
         max_gap_s = options.max_gap_periods * typical_spacing(trajectory.time)
     ok = _bracketed(trajectory.time, meas.time, max_gap_s)
@@ -420,17 +481,26 @@ def refine_station_pose(T_ref_lh: ArrayLike, meas: Measurements, trajectory: Tra
     P = trajectory.at(meas.time[rows])
     world = transform_points(P, board.positions[cols])
     measured = np.stack([meas.azimuth[rows, cols], meas.elevation[rows, cols]], axis=1)
-    R0, t0 = T0[:3, :3], T0[:3, 3]
-
-    def k2(x: Array) -> float:
-        R = _rotation(x[:3]) @ R0
-        return _angle_cost((world - (t0 + x[3:])) @ R, measured)
-
-    res = minimize(k2, np.zeros(6), method="Nelder-Mead", options={
-        "xatol": options.refine_xatol, "fatol": options.refine_fatol,
-        "maxfev": options.refine_maxfev, "initial_simplex": _simplex(0.01, 0.01)})
-    T = make_pose(_rotation(res.x[:3]) @ R0, t0 + res.x[3:])
-    return Refinement(T, float(res.fun), int(res.nfev), int(res.nit), bool(res.success), n_meas)
+    per_meas = np.bincount(rows, minlength=len(meas))
+    seen = per_meas > 0
+    rejected = np.zeros(len(meas), dtype=bool)
+    evaluations = iterations = 0
+    for fit in range(1, MAX_K2_FITS + 1):
+        use = ~rejected[rows]
+        T, res = _minimise_station(world[use], measured[use], T, options)
+        evaluations, iterations = evaluations + int(res.nfev), iterations + int(res.nit)
+        if fit == MAX_K2_FITS or not math.isfinite(options.outlier_mads):
+            break
+        local = (world - T[:3, 3]) @ T[:3, :3]
+        d = np.arctan2(local[:, 1:], local[:, :1]) - measured
+        square = np.bincount(rows, weights=np.einsum("ij,ij->i", d, d), minlength=len(meas))
+        now = np.zeros(len(meas), dtype=bool)
+        now[seen] = outliers(np.sqrt(square[seen] / (2 * per_meas[seen])), options.outlier_mads)
+        if np.array_equal(now, rejected):
+            break
+        rejected = now
+    return Refinement(T, float(res.fun), evaluations, iterations, bool(res.success), n_meas,
+                      int(rejected.sum()))
 
 
 # --- the pipeline ---------------------------------------------------------------------------------
@@ -457,6 +527,8 @@ def hit_residuals(angles: Angles, board: Board, stations: Stations, trajectory: 
 
 @dataclass
 class _StationData:
+    """One station: the measurements K2 uses (rejected fits removed), its board poses."""
+
     meas: Measurements
     poses: BoardPoses
     model: StationModel = field(default_factory=StationModel)
@@ -499,8 +571,11 @@ def solve_paper(board: Board, angles: Angles, models: dict[int, StationModel] | 
             max_gap_periods=options.max_gap_periods), model)
         timings["reconstruct"] = timings.get("reconstruct", 0.0) + _time.perf_counter() - tic
         tic = _time.perf_counter()
-        poses = estimate_board_poses(meas, board, options, progress)
+        fitted = estimate_board_poses(meas, board, options, progress)
+        poses = reject_outlier_poses(fitted, options.outlier_mads)
         timings["board_poses"] = timings.get("board_poses", 0.0) + _time.perf_counter() - tic
+        rejected = fitted.valid & ~poses.valid
+        meas = meas.select(~rejected)
         if poses.valid.sum() < options.min_measurements:
             raise SolverError(
                 f"station {k}: only {int(poses.valid.sum())} usable measurements (need >= "

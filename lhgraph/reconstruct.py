@@ -58,6 +58,11 @@ class Measurements:
         """(M, S) mask of sensors that have both angles."""
         return np.isfinite(self.azimuth) & np.isfinite(self.elevation)
 
+    def select(self, keep: NDArray[np.bool_]) -> Measurements:
+        """The measurements where the (M,) mask ``keep`` is True."""
+        return Measurements(self.lighthouse, self.time[keep], self.azimuth[keep],
+                            self.elevation[keep], self.sensor_ids, self.source_axis[keep])
+
 
 @dataclass
 class _Sweeps:
