@@ -70,7 +70,7 @@ class GraphOptions:
     max_psd_factor: float = 10.0
     adapt_angle_sigma: bool = True
     max_sigma_factor: float = 10.0
-    min_psd_factor: float = 0.3
+    min_psd_factor: float = 0.2
     motion_prior_rounds: int = 5
     solver: str = "lm"
     max_iterations: int = 30

@@ -44,6 +44,12 @@ MOCAP_PREFIX = "/vrpn_client_node/"
 # -64..+56 deg, so anything beyond this bound is not a sweep hit.
 MAX_ABS_ANGLE_RAD = 1.2
 
+# A sweep of one station and axis that starts less than this fraction of the sweep period
+# after the previous one is off the station's timing grid: on data8.11.bag station 0 has ~50
+# such sweeps, with angles 0.16-0.65 rad off their neighbours (most likely station 1's
+# sweeps labelled as station 0's: station 1 misses sweeps at those moments), station 1 four.
+MIN_SWEEP_GAP_PERIODS = 0.75
+
 OUTPUT_FILES = ("angles.csv", "board.toml", "ootx.toml", "imu.csv", "mocap.csv")
 
 
@@ -93,6 +99,9 @@ class HiveBag:
     ``light`` columns (one entry per kept hit): ``time`` (header stamp of the sweep message),
     ``station`` (index into ``serials``), ``hive_axis``, ``sensor``, ``angle`` (rad, hive's
     convention), ``length_us`` (pulse length) and ``sweep`` (sweep message number).
+    ``n_dropped`` hits were beyond ``MAX_ABS_ANGLE_RAD``; ``off_grid_sweeps`` (per station)
+    sweeps with ``n_off_grid_hits`` hits were off their station's timing grid
+    (:func:`off_grid_sweeps`); neither is in ``light``.
     ``calibrations`` are keyed by station index with the OOTX terms in *hive's* axis order
     ``[horizontal, vertical]``.
     """
@@ -101,6 +110,8 @@ class HiveBag:
     serials: list[str]
     light: dict[str, NDArray]
     n_dropped: int
+    off_grid_sweeps: dict[int, int]
+    n_off_grid_hits: int
     board: Board
     hive_calibrations: dict[int, FactoryCalibration]
     imu_time: Array
@@ -125,13 +136,19 @@ class HiveImport:
     sweep_rate_hz: dict[tuple[int, int], float] = field(default_factory=dict)
     imu_rate_hz: float = 0.0
     mocap_rate_hz: float = 0.0
+    off_grid_sweeps: dict[int, int] = field(default_factory=dict)
+    n_off_grid_hits: int = 0
 
     def summary(self) -> str:
         """Human-readable lines."""
         lines = [
             f"stations: {len(self.serials)} ("
             + ", ".join(f"{i}={s}" for i, s in enumerate(self.serials)) + ")",
-            f"sensors: {self.n_sensors}; hits kept {self.n_hits}, dropped {self.n_dropped}",
+            f"sensors: {self.n_sensors}; hits kept {self.n_hits}, dropped {self.n_dropped} "
+            f"(angle beyond {np.degrees(MAX_ABS_ANGLE_RAD):.0f} deg)",
+            f"dropped {sum(self.off_grid_sweeps.values())} sweeps ({self.n_off_grid_hits} hits) "
+            "off their station's timing grid: " + ", ".join(
+                f"station {k}: {n}" for k, n in sorted(self.off_grid_sweeps.items())),
             f"duration: {self.duration_s:.2f} s",
             "sweep rate (Hz): " + ", ".join(
                 f"lh{lh}/ax{ax} {r:.1f}" for (lh, ax), r in sorted(self.sweep_rate_hz.items())),
@@ -212,6 +229,39 @@ def read_hive_bag(bag_path: str | Path) -> HiveBag:
     return _assemble(path, light_rows, lighthouses, tracker, imu, mocap, mocap_topic)
 
 
+def off_grid_sweeps(time: Array, station: NDArray, axis: NDArray, sweep: NDArray,
+                    min_gap_periods: float = MIN_SWEEP_GAP_PERIODS) -> NDArray[np.bool_]:
+    """Hits of sweeps off their (station, axis) timing grid.
+
+    Per station and axis, with ``P`` the median spacing of the sweeps' times (s): a sweep
+    starting less than ``min_gap_periods * P`` after the previous kept one conflicts with
+    it, and of the two the one farther from the grid (one ``P`` after the kept sweep before
+    them) is dropped.
+    """
+    off = np.zeros(len(time), dtype=bool)
+    for st in np.unique(station):
+        for ax in np.unique(axis):
+            rows = np.flatnonzero((station == st) & (axis == ax))
+            ids, first = np.unique(sweep[rows], return_index=True)
+            if len(ids) < 3:
+                continue
+            t = time[rows][first]
+            order = np.argsort(t, kind="stable")
+            ids, t = ids[order], t[order]
+            period = float(np.median(np.diff(t)))
+            kept = [0]
+            for j in range(1, len(t)):
+                if t[j] - t[kept[-1]] >= min_gap_periods * period:
+                    kept.append(j)
+                elif len(kept) > 1:
+                    expected = t[kept[-2]] + period
+                    if abs(t[j] - expected) < abs(t[kept[-1]] - expected):
+                        kept[-1] = j
+            dropped = np.setdiff1d(ids, ids[kept])
+            off[rows[np.isin(sweep[rows], dropped)]] = True
+    return off
+
+
 def _assemble(path: Path, light_rows: list, lighthouses: dict, tracker: object, imu: list,
               mocap: list, mocap_topic: str) -> HiveBag:
     serials = _station_order({r[1] for r in light_rows})
@@ -231,6 +281,10 @@ def _assemble(path: Path, light_rows: list, lighthouses: dict, tracker: object, 
     }
     keep = np.abs(cols["angle"]) < MAX_ABS_ANGLE_RAD
     cols = {k: v[keep] for k, v in cols.items()}
+    off_grid = off_grid_sweeps(cols["time"], cols["station"], cols["hive_axis"], cols["sweep"])
+    n_off_grid = {int(st): int(len(np.unique(cols["sweep"][off_grid & (cols["station"] == st)])))
+                  for st in np.unique(cols["station"])}
+    cols = {k: v[~off_grid] for k, v in cols.items()}
     imu_a = np.array(imu)
     mocap_a = np.array(mocap)
     t0 = float(min(t.min(), imu_a[:, 0].min(), mocap_a[:, 0].min()))
@@ -252,7 +306,8 @@ def _assemble(path: Path, light_rows: list, lighthouses: dict, tracker: object, 
     imu_a = imu_a[imu_order]
     mocap_a = _dedupe_mocap(mocap_a)
     return HiveBag(
-        t0=t0, serials=serials, light=cols, n_dropped=int(np.sum(~keep)), board=board,
+        t0=t0, serials=serials, light=cols, n_dropped=int(np.sum(~keep)),
+        off_grid_sweeps=n_off_grid, n_off_grid_hits=int(np.sum(off_grid)), board=board,
         hive_calibrations=hive_cal,
         imu_time=imu_a[:, 0] - t0, imu_accel=imu_a[:, 1:4], imu_gyro=imu_a[:, 4:7],
         mocap_topic=mocap_topic, mocap_time=mocap_a[:, 0] - t0,
@@ -335,7 +390,8 @@ def import_hive(bag_path: str | Path, out_dir: str | Path, overwrite: bool = Fal
     t_all = np.concatenate([angles.time, bag.imu_time, bag.mocap_time])
     return HiveImport(
         paths=paths, serials=bag.serials, n_hits=len(angles), n_dropped=bag.n_dropped,
-        n_sensors=len(bag.board.ids), duration_s=float(t_all.max() - t_all.min()),
+        n_sensors=len(bag.board.ids), off_grid_sweeps=bag.off_grid_sweeps,
+        n_off_grid_hits=bag.n_off_grid_hits, duration_s=float(t_all.max() - t_all.min()),
         sweep_rate_hz=rates, imu_rate_hz=_rate_hz(bag.imu_time),
         mocap_rate_hz=_rate_hz(bag.mocap_time),
     )

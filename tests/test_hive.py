@@ -19,6 +19,7 @@ from lhgraph.hive import (
     HIVE_MAPPING,
     AxisMapping,
     check_mappings,
+    off_grid_sweeps,
     read_hive_bag,
 )
 from lhgraph.trajectory import load_trajectory
@@ -76,6 +77,32 @@ def test_import_rates(imported):
     assert 240.0 < result.imu_rate_hz < 260.0
     assert 110.0 < result.mocap_rate_hz < 125.0
     assert "stations: 2" in result.summary()
+
+
+def test_off_grid_sweeps_are_dropped_on_the_bag(imported):
+    """Station 0 of data8.11.bag carries stray sweeps between its regular ones (angles
+    0.16-0.65 rad off their neighbours); station 1 hardly any."""
+    result, out = imported
+    assert result.off_grid_sweeps[0] > 20 and result.off_grid_sweeps[1] < 10
+    assert "off their station's timing grid" in result.summary()
+    angles = load_angles(out / "angles.csv")
+    for station in (0, 1):
+        for axis in (0, 1):
+            m = (angles.lighthouse == station) & (angles.axis == axis)
+            _, first = np.unique(angles.extra["sweep"][m], return_index=True)
+            gaps = np.diff(np.sort(angles.time[m][first]))
+            assert gaps.min() > 0.75 * np.median(gaps)
+
+
+def test_off_grid_sweep_rule():
+    rng = np.random.default_rng(0)
+    t_sweep = np.arange(40) / 30.0 + rng.uniform(-0.004, 0.004, 40)  # 30 Hz, 4 ms jitter
+    stray = {10: t_sweep[10] + 0.012, 25: t_sweep[25] - 0.010}  # one late, one early stray
+    times = np.concatenate([t_sweep, list(stray.values())])
+    ids = np.arange(len(times))
+    time, sweep = np.repeat(times, 3), np.repeat(ids, 3)  # three hits per sweep
+    off = off_grid_sweeps(time, np.zeros(len(time), int), np.zeros(len(time), int), sweep)
+    assert set(np.unique(sweep[off])) == {40, 41}
 
 
 def test_verified_axis_mapping_is_best(bag):
