@@ -342,6 +342,27 @@ def _scatter(records: list[dict[str, Any]], key: str, xlabel: str, path: Path) -
     return path
 
 
+def _pairwise(methods: list[str], records: list[dict[str, Any]]) -> list[str]:
+    """Per-capture comparison of the first method with each other one: on how many captures
+    its position error is the smaller, the median ratio and the worst capture."""
+    error = {(r["name"], r["method"]): max(r["position_mm"]) for r in records
+             if "error" not in r}
+    lines = []
+    for other in methods[1:]:
+        names = [n for (n, m) in error if m == methods[0] and (n, other) in error]
+        if not names:
+            continue
+        ratio = np.array([error[(n, methods[0])] / error[(n, other)] for n in names])
+        worst = names[int(np.argmax(ratio))]
+        if not lines:
+            lines = ["", "| method | vs | captures | its error smaller on | median error ratio "
+                     "| worst capture (errors mm) |", "|---|---|---|---|---|---|"]
+        lines.append(f"| {methods[0]} | {other} | {len(names)} | {int(np.sum(ratio < 1))} | "
+                     f"{np.median(ratio):.3f} | {worst} ({error[(worst, methods[0])]:.3f} vs "
+                     f"{error[(worst, other)]:.3f}) |")
+    return lines
+
+
 def write_summary(study: StudyConfig, result: StudyResult, out_dir: Path) -> list[Path]:
     """(Re)write ``study.md`` (Table III, failures, plots), ``study.json`` and the two PNG
     plots: derived files, always replaced."""
@@ -362,6 +383,7 @@ def write_summary(study: StudyConfig, result: StudyResult, out_dir: Path) -> lis
         lines.append(f"| {method} | {len(ok)} | "
                      f"{np.median(pos) if pos else float('nan'):.3f} | "
                      f"{np.median([r['seconds'] for r in ok]) if ok else float('nan'):.2f} |")
+    lines += _pairwise(study.methods, records)
     lines += ["", *(f"- failed: {r['name']} {r['method']}: {r['error']}" for r in failed), "",
               "## Error vs board speed and distance", "",
               "![error vs speed](error_vs_speed.png)", "",

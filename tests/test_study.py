@@ -88,6 +88,12 @@ def test_small_study_runs_and_resumes(tmp_path: Path) -> None:
         assert (out / name).is_file()
     text = (out / "study.md").read_text()
     assert "method graph MAE" in text and "paper MAE (Table III) | 6.9" in text
+    graph_mm = [max(json.loads(result_file(out, n, "graph").read_text())["position_mm"])
+                for n, _ in study.cases()]
+    paper_mm = [max(json.loads(result_file(out, n, "paper").read_text())["position_mm"])
+                for n, _ in study.cases()]
+    smaller = sum(g < p for g, p in zip(graph_mm, paper_mm, strict=True))
+    assert f"| graph | paper | 4 | {smaller} | " in text
     again = run_study(study, out, jobs=2)
     assert again.ran == 0 and again.skipped == 8
     np.testing.assert_allclose(again.statistics()["graph"].mae, stats["graph"].mae)
