@@ -125,7 +125,8 @@ def main(argv: list[str] | None = None) -> int:
         "",
         f"Captures: {len(results)} of {len(paper_protocol(args.protocol))} "
         f"({len(failed)} failed); options: reconstruction={options.reconstruction}, "
-        f"warm_start={options.warm_start}, kabsch_points={options.kabsch_points}.",
+        f"warm_start={options.warm_start}, kabsch_points={options.kabsch_points}, "
+        f"outlier_mads={options.outlier_mads:g}.",
         "",
         main_table,
         "",
