@@ -12,6 +12,10 @@ from .transforms import euler_zyx
 def format_solution(result: SolveResult, errors: list[PoseError] | None = None) -> str:
     """A plain-text table of the stations, residuals, timings and (optional) errors."""
     lines = [f"method {result.method}: {result.status} after {result.iterations} iterations"]
+    if result.stations.extra.get("world") == "gravity":
+        spread = result.diagnostics.get("gravity_spread_deg", float("nan"))
+        lines.append(f"world: gravity-aligned (z up from the stations' accelerometers, which "
+                     f"agree within {spread:.2f} deg), origin at the reference station")
     lines.append(f"{'station':>7} {'x mm':>9} {'y mm':>9} {'z mm':>9} {'roll':>8} {'pitch':>8} "
                  f"{'yaw deg':>8} {'sigma mm':>9} {'sigma deg':>9}")
     for k in result.stations.indices():

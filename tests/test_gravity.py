@@ -134,7 +134,8 @@ def test_cli_world_gravity(tmp_path, capsys):
     config = tmp_path / "solve.toml"
     config.write_text(f'board = "{sim_dir / "board.toml"}"\ncapture = '
                       f'"{sim_dir / "capture.lhcap"}"\nworld = "gravity"\n')
-    assert main(["solve", str(config), "--output", str(out), "--quiet"]) == 0
+    assert main(["solve", str(config), "--output", str(out)]) == 0
+    assert "world: gravity-aligned" in capsys.readouterr().out
     stations = load_stations(out)
     assert stations.extra["world"] == "gravity"
     truth = load_stations(sim_dir / "truth.toml")
