@@ -56,7 +56,8 @@ class GraphOptions:
     rescale both to the solved motion, LM solver only, kept within [``min_psd_factor``,
     ``max_psd_factor``] times the start); ``solver``:
     ``"lm"`` (Levenberg-Marquardt on GTSAM's linear solver) or ``"isam2"``;
-    ``max_iterations``; ``reference``: station index of the world frame (default: the
+    ``max_iterations``; ``relative_tolerance``: LM stops when an iteration lowers the error by
+    less than this fraction; ``reference``: station index of the world frame (default: the
     lowest index present).
     """
 
@@ -74,6 +75,7 @@ class GraphOptions:
     motion_prior_rounds: int = 5
     solver: str = "lm"
     max_iterations: int = 30
+    relative_tolerance: float = 1e-4
     reference: int | None = None
     weak_link_sigma_m: float = 0.02
 
@@ -428,8 +430,10 @@ def _damping(values: gtsam.Values, lam: float) -> gtsam.GaussianFactorGraph:
 def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                          options: GraphOptions, progress: Progress | None,
                          max_iterations: int | None = None, history: list[float] | None = None
-                         ) -> tuple[gtsam.Values, int, float]:
-    """Levenberg-Marquardt driven from Python on GTSAM's sparse linear solver.
+                         ) -> tuple[gtsam.Values, int, float, bool]:
+    """Levenberg-Marquardt driven from Python on GTSAM's sparse linear solver; returns the
+    values, iterations, final error and whether it converged (an iteration lowered the error
+    by less than ``options.relative_tolerance``) rather than ran out of iterations.
 
     GTSAM's own optimisers copy the whole ``Values`` for every Python factor callback (7 s
     instead of 0.5 s for an 8 s capture); linearising a Python-owned ``Values`` does not.
@@ -439,6 +443,7 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
     history.append(error)
     lam = 0.0
     iterations = 0
+    converged = False
     for iterations in range(1, (max_iterations or options.max_iterations) + 1):
         lin = graph.linearize(values)
         while True:
@@ -455,9 +460,10 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
             values, error = candidate, new_error
             lam = lam / 10.0 if lam > 1e-6 else 0.0
         history.append(error)
-        if improvement < 1e-5 * max(error, 1.0):
+        if improvement < options.relative_tolerance * max(error, 1.0):
+            converged = True
             break
-    return values, iterations, error
+    return values, iterations, error, converged
 
 
 def _with(a: gtsam.GaussianFactorGraph, b: gtsam.GaussianFactorGraph
@@ -495,14 +501,15 @@ def _adaptive_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ev: _E
     """LM solves alternating with a variance-component update of the motion prior's strength:
     its covariance is scaled until the solved motion's whitened prior residuals have unit
     variance per degree of freedom (so the prior matches how the board actually moved).
-    Adapting rounds take at most two LM iterations; a last LM run converges."""
+    Adapting rounds take at most two LM iterations; a last LM run converges, unless the round
+    that found the prior and noise matched has converged already."""
     total = 0
+    converged = False
     adapting = options.adapt_motion_prior or options.adapt_angle_sigma
     rounds = options.motion_prior_rounds if adapting else 0
     for _ in range(rounds):
-        values, iterations, _error = _levenberg_marquardt(graph, values, options,
-                                                                progress, max_iterations=2,
-                                                                history=ev.error_history)
+        values, iterations, error, converged = _levenberg_marquardt(
+            graph, values, options, progress, max_iterations=2, history=ev.error_history)
         total += iterations
         ev._read(values)
         ratio = float(np.clip(ev.motion_chi2_per_dof(), 1e-3, 1e3))
@@ -529,8 +536,11 @@ def _adaptive_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ev: _E
             break
         ev.scale_motion_prior(ratio)
         ev.scale_bearing_noise(noise)
-    values, iterations, error = _levenberg_marquardt(graph, values, options, progress,
-                                                          history=ev.error_history)
+        converged = False
+    if converged:
+        return values, total, error
+    values, iterations, error, _ = _levenberg_marquardt(graph, values, options, progress,
+                                                        history=ev.error_history)
     return values, total + iterations, error
 
 
