@@ -75,7 +75,7 @@ class GraphOptions:
     motion_prior_rounds: int = 5
     solver: str = "lm"
     max_iterations: int = 30
-    relative_tolerance: float = 1e-4
+    relative_tolerance: float = 1e-5
     reference: int | None = None
     weak_link_sigma_m: float = 0.02
 
