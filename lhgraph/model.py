@@ -169,6 +169,15 @@ def sensor_in_station(T_world_lh: ArrayLike, T_world_board: ArrayLike, s_board: 
     return (R @ s[..., None])[..., 0] + t
 
 
+def board_jacobian(J_p: Array, R_lh_board: Array, s_board: Array) -> Array:
+    """Derivative ``(..., 6)`` of an angle w.r.t. a right perturbation ``[omega, v]`` of
+    ``T_world_board``, from its derivative ``J_p`` ``(..., 3)`` w.r.t. the station-frame point
+    ``p = R_lh_board s_board + t``: ``d p / d xi = R_lh_board [-[s]x, I]``, so the result is
+    ``[s x J_b, J_b]`` with ``J_b = J_p R_lh_board`` (broadcasting over leading axes)."""
+    J_b = (J_p[..., None, :] @ R_lh_board)[..., 0, :]
+    return np.concatenate([cross(s_board, J_b), J_b], axis=-1)
+
+
 def predict(
     T_world_lh: ArrayLike,
     T_world_board: ArrayLike,
@@ -192,11 +201,8 @@ def predict(
     angle, J_p = sweep_angle(p_lh, axis, model, jacobian=True)
     # p_lh = R_l^T (R_b s + t_b - t_l)
     # d p_lh / d xi_lh    = [ [p_lh]x , -I ]       -> J [p]x = J x p
-    # d p_lh / d xi_board = R_lh_board [ -[s]x , I ] -> -J_b [s]x = s x J_b
     H_lh = np.concatenate([cross(J_p, p_lh), -J_p], axis=-1)
-    J_b = (J_p[..., None, :] @ R)[..., 0, :]
-    H_board = np.concatenate([cross(s, J_b), J_b], axis=-1)
-    return angle, H_lh, H_board
+    return angle, H_lh, board_jacobian(J_p, R, s)
 
 
 def ideal_from_measured(

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .model import IDEAL, StationModel, sweep_angle
+from .model import IDEAL, StationModel, board_jacobian, sweep_angle
 from .transforms import cross, make_pose, se3_exp, so3_exp
 
 Array = NDArray[np.float64]
@@ -153,10 +153,7 @@ def _residuals(T_lh_board: Array, s: Array, z: Array, model: StationModel,
         return sweep_angle(p2, axis, model).reshape(2, -1).T - z
     angle, J_p = sweep_angle(p2, axis, model, jacobian=True)
     r = angle.reshape(2, -1).T - z
-    # d p / d xi_board = R [-[s]x, I]  ->  [s x J_b, J_b] with J_b = J_p R
-    J_b = (J_p.reshape(2, -1, 1, 3) @ R)[:, :, 0, :]
-    H = np.concatenate([cross(s, J_b), J_b], axis=-1)
-    return r, np.swapaxes(H, 0, 1)
+    return r, np.swapaxes(board_jacobian(J_p.reshape(2, -1, 3), R, s), 0, 1)
 
 
 def _facing(T_lh_board: Array, positions: Array, normals: Array,

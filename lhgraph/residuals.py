@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .model import StationModel, sweep_angle
+from .model import StationModel, board_jacobian, sweep_angle
 from .transforms import cross, inverse, se3_log, skew
 
 Array = NDArray[np.float64]
@@ -109,10 +109,9 @@ def bearing_residuals(
         return r, None, None, None
     # d p_lh / d xi_lh = [[p]x, -I];  d p_lh / d xi_X = R_lb [-[s']x, I]
     H_L = np.concatenate([cross(J_p, p_lh), -J_p], axis=1)
-    J_b = (J_p[:, None, :] @ R_lb)[:, 0, :]
-    H_X = np.concatenate([cross(s_moved, J_b), J_b], axis=1)
-    # d s' / d V = dt [-[s]x, I]
-    H_V = np.concatenate([cross(s_board, J_b), J_b], axis=1) * hits.dt[:, None]
+    H_X = board_jacobian(J_p, R_lb, s_moved)
+    # d s' / d V = dt [-[s]x, I]: the board Jacobian at s, scaled by dt
+    H_V = board_jacobian(J_p, R_lb, s_board) * hits.dt[:, None]
     return r, H_X, H_V, H_L
 
 
