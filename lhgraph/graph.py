@@ -56,9 +56,10 @@ class GraphOptions:
     rescale both to the solved motion, LM solver only, kept within [``min_psd_factor``,
     ``max_psd_factor``] times the start); ``solver``:
     ``"lm"`` (Levenberg-Marquardt on GTSAM's linear solver) or ``"isam2"``;
-    ``max_iterations``; ``relative_tolerance``: LM stops when an iteration lowers the error by
-    less than this fraction; ``reference``: station index of the world frame (default: the
-    lowest index present).
+    ``max_iterations``; LM stops when an iteration moves no station coordinate by more than
+    ``step_tolerance_sigma`` of its standard deviations or lowers the error by less than the
+    fraction ``relative_tolerance``; ``reference``: station index of the world frame
+    (default: the lowest index present).
     """
 
     angle_sigma_rad: float = 4e-5
@@ -76,6 +77,7 @@ class GraphOptions:
     solver: str = "lm"
     max_iterations: int = 30
     relative_tolerance: float = 1e-5
+    step_tolerance_sigma: float = 0.05
     reference: int | None = None
     weak_link_sigma_m: float = 0.02
 
@@ -250,10 +252,12 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
 
 class _Evaluator:
     """Vectorised residuals of every factor, recomputed only when the linearisation point of a
-    factor's own variables differs from the cached one."""
+    factor's own variables differs from the cached one; also the graph's cost in numpy (the
+    same number as ``graph.error``, without a Python callback per factor)."""
 
-    def __init__(self, problem: GraphProblem):
+    def __init__(self, problem: GraphProblem, options: GraphOptions):
         self.p = problem
+        self.options = options
         self.error_history: list[float] = []  # graph error per LM iteration (SolveResult)
         K, S = problem.n_states, len(problem.station_ids)
         self.X = np.full((K, 4, 4), np.nan)
@@ -264,36 +268,63 @@ class _Evaluator:
         self._ones = np.ones((len(problem.hits.angle), 1))
         self.recomputes = 0
         self._values: gtsam.Values | None = None
+        self._psd = (options.accel_psd_rot, options.accel_psd_pos)
+        self.Q = wnoa_covariance(self.dt, *self._psd)  # the motion factors' noise models
+        self._Q_inv = np.linalg.inv(self.Q)
         self.motion_scale = 1.0  # 1/sqrt(s): the motion prior's covariance is s * Q
         self.bearing_scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
         self._jacobians_ready = False
 
     def scale_bearing_noise(self, factor: float) -> None:
-        """Multiply the diodes' angle variance by ``factor`` (cached residuals go stale)."""
+        """Multiply the diodes' angle variance by ``factor``."""
         self.bearing_scale /= np.sqrt(factor)
-        self._values = None
-        self.X = np.full_like(self.X, np.nan)
+        self._scale_residuals()
 
     def scale_motion_prior(self, factor: float) -> None:
-        """Multiply the motion prior's covariance by ``factor`` (cached residuals go stale)."""
+        """Multiply the motion prior's covariance by ``factor``."""
         self.motion_scale /= np.sqrt(factor)
-        self._values = None
-        self.X = np.full_like(self.X, np.nan)
+        self._scale_residuals()
+
+    def _scale_residuals(self) -> None:
+        self.r_whitened = self.r * self.bearing_scale
+        self.e = self.e_raw * self.motion_scale
+        self._jacobians_ready = False
 
     def motion_chi2_per_dof(self) -> float:
         """Mean whitened squared motion-prior residual per degree of freedom under the current
         prior (1 if its strength matches the solved motion)."""
-        Q = wnoa_covariance(self.dt, self._psd[0], self._psd[1])
-        return float(np.mean(np.einsum("ki,kij,kj->k", self.e, np.linalg.inv(Q), self.e)) / 12)
+        return float(np.mean(np.einsum("ki,kij,kj->k", self.e, self._Q_inv, self.e)) / 12)
 
-    def angle_sigma(self, options: GraphOptions) -> float:
+    def angle_sigma(self) -> float:
         """Effective per-diode angle noise (rad) now."""
-        return options.angle_sigma_rad / self.bearing_scale
+        return self.options.angle_sigma_rad / self.bearing_scale
 
     def motion_psd(self) -> tuple[float, float]:
         """Effective (rotational, linear) acceleration PSD of the motion prior now."""
         s = self.motion_scale ** -2
         return self._psd[0] * s, self._psd[1] * s
+
+    def cost(self, values: gtsam.Values) -> float:
+        """The graph's error at ``values`` (what ``graph.error`` returns): robust loss of the
+        whitened diode residuals, plus half the squared whitened offset priors and motion
+        priors."""
+        self.at(values)
+        o = self.options
+        x = self.r_whitened / o.angle_sigma_rad
+        k = o.huber_k
+        if o.loss == "cauchy":
+            bearing = 0.5 * k**2 * np.log1p((x / k) ** 2)
+        else:
+            ax = np.abs(x)
+            bearing = np.where(ax <= k, 0.5 * x**2, k * ax - 0.5 * k**2)
+        offsets = 0.5 * (self.B / o.sweep_offset_sigma_rad) ** 2
+        motion = 0.5 * np.einsum("ki,kij,kj->k", self.e, self._Q_inv, self.e)
+        return float(bearing.sum() + offsets.sum() + motion.sum())
+
+    def at(self, values: gtsam.Values) -> None:
+        """Evaluate the residuals at ``values`` unless they are the cached point."""
+        if values is not self._values:
+            self._read(values)
 
     def _read(self, values: gtsam.Values) -> None:
         poses = gtsam.utilities.extractPose3(values)
@@ -309,10 +340,9 @@ class _Evaluator:
         h = self.p.hits
         self.r = bearing_residuals(h, self.X, self.V, self.L, self.p.models, False)[0]
         self.r += self.B[h.state]
-        self.r_whitened = self.r * self.bearing_scale
-        self.e = motion_residuals(self.X[:-1], self.V[:-1], self.X[1:], self.V[1:], self.dt,
-                                  False)[0] * self.motion_scale
-        self._jacobians_ready = False
+        self.e_raw = motion_residuals(self.X[:-1], self.V[:-1], self.X[1:], self.V[1:],
+                                      self.dt, False)[0]
+        self._scale_residuals()
         self.recomputes += 1
         self._values = values
 
@@ -375,8 +405,7 @@ class _Evaluator:
 def build_graph(problem: GraphProblem, options: GraphOptions
                 ) -> tuple[gtsam.NonlinearFactorGraph, _Evaluator]:
     """The nonlinear factor graph of ``problem`` (named noise models, one factor per sweep)."""
-    ev = _Evaluator(problem)
-    ev._psd = (options.accel_psd_rot, options.accel_psd_pos)
+    ev = _Evaluator(problem, options)
     graph = gtsam.NonlinearFactorGraph()
     estimators = {"huber": gtsam.noiseModel.mEstimator.Huber,
                   "cauchy": gtsam.noiseModel.mEstimator.Cauchy}
@@ -394,9 +423,8 @@ def build_graph(problem: GraphProblem, options: GraphOptions
     offset_noise = gtsam.noiseModel.Isotropic.Sigma(1, options.sweep_offset_sigma_rad)
     for k in range(problem.n_states):
         graph.add(gtsam.PriorFactorVector(B(k), np.zeros(1), offset_noise))
-    Q = wnoa_covariance(ev.dt, options.accel_psd_rot, options.accel_psd_pos)
     for k in range(problem.n_states - 1):
-        motion_noise = gtsam.noiseModel.Gaussian.Covariance(Q[k])
+        motion_noise = gtsam.noiseModel.Gaussian.Covariance(ev.Q[k])
         graph.add(gtsam.CustomFactor(motion_noise, [X(k), V(k), X(k + 1), V(k + 1)],
                                      ev.motion(k)))
     return graph, ev
@@ -427,43 +455,135 @@ def _damping(values: gtsam.Values, lam: float) -> gtsam.GaussianFactorGraph:
     return damp
 
 
+def elimination_ordering(problem: GraphProblem) -> gtsam.Ordering:
+    """Sweep offsets first, then the board states in time order, the stations last: the
+    chain eliminates without fill-in, and the stations' marginals are read off the root."""
+    ordering = gtsam.Ordering()
+    for k in range(problem.n_states):
+        ordering.push_back(B(k))
+    for k in range(problem.n_states):
+        ordering.push_back(X(k))
+        ordering.push_back(V(k))
+    for slot in range(1, len(problem.station_ids)):
+        ordering.push_back(L(slot))
+    return ordering
+
+
+@dataclass
+class LMOutcome:
+    """End of a Levenberg-Marquardt solve: the values, the iterations taken, the final error,
+    whether it converged, and the eliminated (undamped) linear system of the last iteration
+    at the final noise levels, if there is one (for the covariance)."""
+
+    values: gtsam.Values
+    iterations: int
+    error: float
+    converged: bool
+    tree: gtsam.GaussianBayesTree | None
+
+
+def _update_noise_levels(ev: _Evaluator, options: GraphOptions,
+                         progress: Progress | None) -> bool:
+    """One variance-component update at the evaluator's current point: rescale the motion
+    prior until its whitened residuals have unit variance per degree of freedom (so the prior
+    matches how the board actually moved) and the diodes' noise to the residuals' robust
+    spread. Returns whether anything changed (False: both match the data or sit at their
+    bounds)."""
+    ratio = float(np.clip(ev.motion_chi2_per_dof(), 1e-3, 1e3))
+    if not options.adapt_motion_prior:
+        ratio = 1.0
+    # a model misfit shows up as board jitter: never loosen the prior beyond the cap
+    ratio = min(ratio, options.max_psd_factor / ev.motion_scale**-2)
+    # nor stiffen it below the floor: a real board's motion is not exactly WNOA, and an
+    # over-stiff prior trades the station's accuracy for smoothness
+    ratio = max(ratio, options.min_psd_factor / ev.motion_scale**-2)
+    # the diodes' noise from the residuals (robust: MAD), never below the configured
+    # sigma (the 2 MHz quantisation) nor above max_sigma_factor times it
+    sigma_hat = 1.4826 * float(np.median(np.abs(ev.r)))
+    noise = 1.0
+    if options.adapt_angle_sigma:
+        noise = float(np.clip(sigma_hat, options.angle_sigma_rad,
+                              options.max_sigma_factor * options.angle_sigma_rad)
+                      / ev.angle_sigma())**2
+    if progress:
+        progress(f"motion prior: chi2/dof {ratio:.3g}; angle noise {sigma_hat * 1e6:.1f} urad")
+    if 0.8 < ratio < 1.25 and 0.8 < noise < 1.25:
+        return False
+    ev.scale_motion_prior(ratio)
+    ev.scale_bearing_noise(noise)
+    return True
+
+
+def _station_step_sigmas(tree: gtsam.GaussianBayesTree, delta: gtsam.VectorValues,
+                         n_stations: int) -> float:
+    """Largest step of any station coordinate in units of its standard deviation."""
+    steps = [np.abs(delta.at(L(slot))) / np.sqrt(np.diag(tree.marginalCovariance(L(slot))))
+             for slot in range(1, n_stations)]
+    return float(np.max(steps))
+
+
 def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
-                         options: GraphOptions, progress: Progress | None,
-                         max_iterations: int | None = None, history: list[float] | None = None
-                         ) -> tuple[gtsam.Values, int, float, bool]:
-    """Levenberg-Marquardt driven from Python on GTSAM's sparse linear solver; returns the
-    values, iterations, final error and whether it converged (an iteration lowered the error
-    by less than ``options.relative_tolerance``) rather than ran out of iterations.
+                         ev: _Evaluator, ordering: gtsam.Ordering, options: GraphOptions,
+                         progress: Progress | None) -> LMOutcome:
+    """Levenberg-Marquardt driven from Python on GTSAM's sparse linear solver.
+
+    Each iteration linearises the graph (GTSAM calls the factors, which slice the
+    evaluator's vectorised Jacobians), eliminates it in ``ordering`` and steps; the error is
+    the evaluator's numpy cost. While the noise levels adapt (``options.adapt_motion_prior``
+    / ``adapt_angle_sigma``, at most ``motion_prior_rounds`` updates), each accepted step is
+    followed by a variance-component update. Converged: an iteration left the noise levels
+    as they were and either lowered the error by less than ``options.relative_tolerance`` or
+    moved no station coordinate by more than ``options.step_tolerance_sigma`` standard
+    deviations (the stations are what the solve is for).
 
     GTSAM's own optimisers copy the whole ``Values`` for every Python factor callback (7 s
     instead of 0.5 s for an 8 s capture); linearising a Python-owned ``Values`` does not.
     """
-    error = graph.error(values)
-    history = [] if history is None else history
-    history.append(error)
+    error = ev.cost(values)
+    ev.error_history.append(error)
+    adapting = options.adapt_motion_prior or options.adapt_angle_sigma
+    updates = options.motion_prior_rounds if adapting else 0
     lam = 0.0
-    iterations = 0
+    tree = None
     converged = False
-    for iterations in range(1, (max_iterations or options.max_iterations) + 1):
+    iterations = 0
+    for iterations in range(1, options.max_iterations + 1):
         lin = graph.linearize(values)
         while True:
             system = lin if lam == 0.0 else _with(lin, _damping(values, lam))
-            candidate = values.retract(system.optimize())
-            new_error = graph.error(candidate)
+            tree = system.eliminateMultifrontal(ordering)
+            delta = tree.optimize()
+            candidate = values.retract(delta)
+            new_error = ev.cost(candidate)
             if new_error <= error or lam > 1e8:
                 break
             lam = max(lam * 10.0, 1e-6)
+        damped = lam > 0.0
         improvement = error - new_error
+        station_step = _station_step_sigmas(tree, delta, len(ev.p.station_ids))
         if progress:
             progress(f"iteration {iterations}: error {new_error:.6g}")
-        if new_error <= error:
+        accepted = new_error <= error
+        if accepted:
             values, error = candidate, new_error
             lam = lam / 10.0 if lam > 1e-6 else 0.0
-        history.append(error)
-        if improvement < options.relative_tolerance * max(error, 1.0):
+        ev.error_history.append(error)
+        rescaled = False
+        if updates > 0:
+            updates -= 1
+            ev.at(values)
+            rescaled = _update_noise_levels(ev, options, progress)
+            if rescaled:
+                error = ev.cost(values)
+            else:
+                updates = 0  # matched: the levels stay
+        small = (improvement < options.relative_tolerance * max(error, 1.0)
+                 or (accepted and station_step < options.step_tolerance_sigma))
+        if small and not rescaled:
             converged = True
             break
-    return values, iterations, error, converged
+    usable = converged and not damped
+    return LMOutcome(values, iterations, error, converged, tree if usable else None)
 
 
 def _with(a: gtsam.GaussianFactorGraph, b: gtsam.GaussianFactorGraph
@@ -495,76 +615,37 @@ def _isam2(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, options: Gra
     return isam.calculateEstimate(), iterations
 
 
-def _adaptive_lm(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ev: _Evaluator,
-                 options: GraphOptions, progress: Progress | None
-                 ) -> tuple[gtsam.Values, int, float]:
-    """LM solves alternating with a variance-component update of the motion prior's strength:
-    its covariance is scaled until the solved motion's whitened prior residuals have unit
-    variance per degree of freedom (so the prior matches how the board actually moved).
-    Adapting rounds take at most two LM iterations; a last LM run converges, unless the round
-    that found the prior and noise matched has converged already."""
-    total = 0
-    converged = False
-    adapting = options.adapt_motion_prior or options.adapt_angle_sigma
-    rounds = options.motion_prior_rounds if adapting else 0
-    for _ in range(rounds):
-        values, iterations, error, converged = _levenberg_marquardt(
-            graph, values, options, progress, max_iterations=2, history=ev.error_history)
-        total += iterations
-        ev._read(values)
-        ratio = float(np.clip(ev.motion_chi2_per_dof(), 1e-3, 1e3))
-        if not options.adapt_motion_prior:
-            ratio = 1.0
-        # a model misfit shows up as board jitter: never loosen the prior beyond the cap
-        ratio = min(ratio, options.max_psd_factor / ev.motion_scale**-2)
-        # nor stiffen it below the floor: a real board's motion is not exactly WNOA, and an
-        # over-stiff prior trades the station's accuracy for smoothness
-        ratio = max(ratio, options.min_psd_factor / ev.motion_scale**-2)
-        # the diodes' noise from the residuals (robust: MAD), never below the configured
-        # sigma (the 2 MHz quantisation) nor above max_sigma_factor times it
-        sigma = options.angle_sigma_rad / ev.bearing_scale
-        sigma_hat = 1.4826 * float(np.median(np.abs(ev.r)))
-        noise = 1.0
-        if options.adapt_angle_sigma:
-            noise = float(np.clip(sigma_hat, options.angle_sigma_rad,
-                                  options.max_sigma_factor * options.angle_sigma_rad) / sigma)**2
-        if progress:
-            progress(f"motion prior: chi2/dof {ratio:.3g}; angle noise {sigma_hat * 1e6:.1f}"
-                     " urad")
-        matched = 0.8 < ratio < 1.25 and 0.8 < noise < 1.25
-        if matched:  # prior and noise match the data (or sit at their bounds)
-            break
-        ev.scale_motion_prior(ratio)
-        ev.scale_bearing_noise(noise)
-        converged = False
-    if converged:
-        return values, total, error
-    values, iterations, error, _ = _levenberg_marquardt(graph, values, options, progress,
-                                                        history=ev.error_history)
-    return values, total + iterations, error
-
-
 def _optimise(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, problem: GraphProblem,
               ev: _Evaluator, options: GraphOptions, progress: Progress | None
-              ) -> tuple[gtsam.Values, dict[int, Array], int, float]:
-    """Batch solve; returns values, station covariances, iterations and final error."""
+              ) -> tuple[gtsam.Values, dict[int, Array], int, float, bool]:
+    """Batch solve; returns values, station covariances, iterations, final error and
+    whether the solver converged.
+
+    The covariances come from the last LM iteration's eliminated system when it converged
+    undamped (linearised one converged step before the result, at the final noise levels),
+    otherwise from a linearisation at the result."""
     if options.solver not in ("lm", "isam2"):
         raise SolverError(f"unknown solver '{options.solver}' (expected lm or isam2)")
+    ordering = elimination_ordering(problem)
     try:
         if options.solver == "lm":
-            result, iterations, error = _adaptive_lm(graph, values, ev, options, progress)
+            fit = _levenberg_marquardt(graph, values, ev, ordering, options, progress)
+            result, iterations, error = fit.values, fit.iterations, fit.error
+            converged, tree = fit.converged, fit.tree
         else:
             result, iterations = _isam2(graph, values, options, progress)
             result = gtsam.Values(result)
             error = graph.error(result)
-        marginals = gtsam.Marginals(graph.linearize(result), result)
-        cov = {slot: marginals.marginalCovariance(L(slot))
+            converged, tree = iterations < options.max_iterations, None
+        if tree is None:
+            tree = graph.linearize(result).eliminateMultifrontal(ordering)
+        cov = {slot: tree.marginalCovariance(L(slot))
                for slot in range(1, len(problem.station_ids))}
     except RuntimeError as err:  # gtsam's IndeterminateLinearSystemException and kin
         first = next((line.strip() for line in str(err).splitlines() if line.strip()), "")
         raise SolverError(f"the linearised problem cannot be solved ({first}): some board "
                           "state or station is not determined by the data") from err
-    return result, cov, iterations, error
+    return result, cov, iterations, error, converged
 
 
 def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | None = None,
@@ -593,10 +674,10 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     t1 = time.perf_counter()
     graph, ev = build_graph(problem, options)
     values = initial_values(init)
-    result, cov, iterations, final_error = _optimise(graph, values, problem, ev, options,
-                                                     progress)
+    result, cov, iterations, final_error, converged = _optimise(graph, values, problem, ev,
+                                                                options, progress)
     timings["optimise"] = time.perf_counter() - t1
-    ev._read(result)
+    ev.at(result)
     warnings = []
     out: dict[int, Station] = {reference: Station(np.eye(4), np.zeros((6, 6)),
                                                   problem.models[0])}
@@ -608,7 +689,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
             warnings.append(f"station {sid}: weak link to the reference (position sigma "
                             f"{sigma_m * 1e3:.0f} mm); the board was rarely seen by both")
     h = problem.hits
-    z = np.abs(ev.r) / (ev.angle_sigma(options) * options.huber_k)
+    z = np.abs(ev.r) / (ev.angle_sigma() * options.huber_k)
     weight = 1.0 / (1.0 + z**2) if options.loss == "cauchy" else np.minimum(1.0, 1.0 / z)
     rows = problem.hit_rows
     residuals = Residuals(angles.time[rows], angles.lighthouse[rows], h.axis,
@@ -619,7 +700,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         stations=Stations(reference, out),
         trajectory=Trajectory(problem.state_time, ev.X.copy()),
         residuals=residuals,
-        status="converged" if iterations < options.max_iterations else "max_iterations",
+        status="converged" if converged else "max_iterations",
         iterations=iterations,
         final_error=float(final_error),
         timings_s=timings,
@@ -627,5 +708,5 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         error_history=ev.error_history,
         diagnostics={"accel_psd_rot": ev.motion_psd()[0], "accel_psd_pos": ev.motion_psd()[1],
                      "motion_chi2_per_dof": ev.motion_chi2_per_dof(),
-                     "angle_sigma_rad": ev.angle_sigma(options)},
+                     "angle_sigma_rad": ev.angle_sigma()},
     )
