@@ -59,10 +59,10 @@ class GraphOptions:
     rescale both to the solved motion, LM solver only, kept within [``min_psd_factor``,
     ``max_psd_factor``] times the start); ``solver``:
     ``"lm"`` (Levenberg-Marquardt on GTSAM's linear solver) or ``"isam2"``;
-    ``max_iterations``; LM stops when an iteration moves no station coordinate by more than
-    ``step_tolerance_sigma`` of its standard deviations or lowers the error by less than the
-    fraction ``relative_tolerance``; ``reference``: station index of the world frame
-    (default: the lowest index present).
+    ``max_iterations``; LM stops when the stations are estimated to be within
+    ``step_tolerance_sigma`` of their standard deviations from the converged solution or an
+    iteration lowers the error by less than the fraction ``relative_tolerance``;
+    ``reference``: station index of the world frame (default: the lowest index present).
     """
 
     angle_sigma_rad: float = 4e-5
@@ -531,6 +531,17 @@ def _station_step_sigmas(tree: gtsam.GaussianBayesTree, delta: gtsam.VectorValue
     return float(np.max(steps))
 
 
+def _remaining_sigmas(step: float, previous: float | None) -> float:
+    """How far (in standard deviations) the stations still are from convergence after a step
+    of ``step``: converging linearly at the rate ``rho = step / previous`` the steps still to
+    come add up to ``step rho / (1 - rho)``; without a previous step at the same noise
+    levels, or when the steps do not shrink, the step itself."""
+    if previous is None or step >= previous:
+        return step
+    rho = step / previous
+    return step * rho / (1.0 - rho)
+
+
 def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                          ev: _Evaluator, ordering: gtsam.Ordering, options: GraphOptions,
                          progress: Progress | None) -> LMOutcome:
@@ -542,8 +553,9 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
     / ``adapt_angle_sigma``, at most ``motion_prior_rounds`` updates), each accepted step is
     followed by a variance-component update. Converged: an iteration left the noise levels
     as they were and either lowered the error by less than ``options.relative_tolerance`` or
-    moved no station coordinate by more than ``options.step_tolerance_sigma`` standard
-    deviations (the stations are what the solve is for).
+    left the stations within ``options.step_tolerance_sigma`` standard deviations of where
+    the iteration converges to (per coordinate, estimated from how fast the steps shrink:
+    :func:`_remaining_sigmas`; the stations are what the solve is for).
 
     GTSAM's own optimisers copy the whole ``Values`` for every Python factor callback (7 s
     instead of 0.5 s for an 8 s capture); linearising a Python-owned ``Values`` does not.
@@ -556,6 +568,7 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
     tree = None
     converged = False
     iterations = 0
+    previous_step = None  # the last accepted station step at the current noise levels
     for iterations in range(1, options.max_iterations + 1):
         lin = graph.linearize(values)
         while True:
@@ -586,11 +599,13 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
                 error = ev.cost(values)
             else:
                 updates = 0  # matched: the levels stay
+        remaining = _remaining_sigmas(station_step, previous_step)
         small = (improvement < options.relative_tolerance * max(error, 1.0)
-                 or (accepted and station_step < options.step_tolerance_sigma))
+                 or (accepted and remaining < options.step_tolerance_sigma))
         if small and not rescaled:
             converged = True
             break
+        previous_step = station_step if accepted and not rescaled else None
     usable = converged and not damped
     return LMOutcome(values, iterations, error, converged, tree if usable else None)
 
