@@ -276,7 +276,8 @@ def _slot_grid(syncs: _Syncs, rate: float, opt: DecodeOptions, report: DecodeRep
     idx = np.flatnonzero(keep)
     order = np.lexsort((-syncs.n_sensors[idx], role[idx], slot[idx]))
     idx = idx[order]
-    dup = np.r_[False, (slot[idx][1:] == slot[idx][:-1]) & (role[idx][1:] == role[idx][:-1])]
+    dup = np.zeros(len(idx), dtype=bool)  # no flash on the grid: nothing to deduplicate
+    dup[1:] = (slot[idx][1:] == slot[idx][:-1]) & (role[idx][1:] == role[idx][:-1])
     keep[idx[dup]] = False
     report.drop("duplicate sync flashes in one slot", np.count_nonzero(dup))
     slot = slot - slot[keep].min() if np.any(keep) else slot
