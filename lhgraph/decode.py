@@ -172,6 +172,9 @@ def decode_pulses(pulses: LightPulses, sample_rate_hz: float, board: Board | Non
     if grid is None:
         return empty
     slot, role, keep = grid
+    if not np.any(keep):
+        report.notes.append("no sync flash on the slot grid: nothing to decode")
+        return empty
     syncs = _Syncs(syncs.start[keep], syncs.width[keep], syncs.n_sensors[keep])
     report.sync_flashes = len(syncs.start)
     pattern, data = _classify(slot, role, syncs.width / rate, report)
