@@ -14,8 +14,6 @@ and ``DIR`` holds a comparison ``summary.json`` and ``report.html``.
 
 from __future__ import annotations
 
-import hashlib
-import importlib.metadata
 import json
 import math
 import platform
@@ -70,6 +68,8 @@ class RunDirectory:
 
 def sha256_of(path: str | Path) -> str:
     """Hex SHA-256 of a file's bytes."""
+    import hashlib  # here, not at the top: `lhgraph solve` to a stations file never needs it
+
     digest = hashlib.sha256()
     with Path(path).open("rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -79,6 +79,8 @@ def sha256_of(path: str | Path) -> str:
 
 def versions() -> dict[str, str]:
     """Versions of lhgraph, gtsam, numpy and Python."""
+    import importlib.metadata  # here, not at the top: 15 ms of start-up for every solve
+
     out = {}
     for name in ("lhgraph", "gtsam", "numpy"):
         try:
