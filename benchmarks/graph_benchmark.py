@@ -11,8 +11,8 @@
 3. 3 % reflections vs clean on the default layout (10 seeds).
 4. Run time: `solve` of an 8 s capture in-process (median of 5, wall and CPU time) and the
    whole `lhgraph solve` process (median of 5, bytecode compiled first; and the bare
-   `import numpy, gtsam` process it cannot go below), a 60 s capture (median of 3), and the streaming mode's update time
-   per 33 ms sync cycle.
+   `import numpy, gtsam` process it cannot go below), a 60 s capture (median of 3), and the
+   streaming mode's update time per 33 ms sync cycle.
 """
 
 from __future__ import annotations
