@@ -247,11 +247,12 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
     order = np.argsort(times, kind="stable")
     times, T_all = times[order], T_all[order]
     keep = np.r_[True, np.diff(times) > 0]
-    X0 = interpolate_poses(times[keep], T_all[keep], problem.state_time)
-    # twists by central differences over +-h on the merged path (states may be closer)
+    # poses at the states, and twists by central differences over +-h on the merged path
+    # (states may be closer together than h)
     h = 0.5 * velocity_span_s
-    before = interpolate_poses(times[keep], T_all[keep], problem.state_time - h)
-    after = interpolate_poses(times[keep], T_all[keep], problem.state_time + h)
+    t = problem.state_time
+    X0, before, after = interpolate_poses(times[keep], T_all[keep],
+                                          np.concatenate([t, t - h, t + h])).reshape(3, -1, 4, 4)
     V0 = se3_log(inverse(before) @ after) / (2 * h)
     return Initialisation(L0, X0, V0, overlap)
 
