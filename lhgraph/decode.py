@@ -256,20 +256,21 @@ def _slot_grid(syncs: _Syncs, rate: float, opt: DecodeOptions, report: DecodeRep
     c = candidates[int(np.argmax(score))]
     role = np.full(len(t), -1)
     for width in (wide, tol, tol):
+        role[:] = -1
         for r in (0, 1):
             role[near(phase, np.array([c + r * STATION_OFFSET_SLOTS]), width)[:, 0]] = r
         on = role >= 0
-        if np.count_nonzero(on) < 2:
-            break
         u = t / slot_len - c - role * STATION_OFFSET_SLOTS
         n = np.round(u)
+        if np.count_nonzero(on) < 2 or np.ptp(n[on]) == 0:
+            break  # fewer than two slots to refine the period and phase on
         # refine period and phase on the flashes assigned so far (both roles share them)
         A = np.stack([np.ones(np.count_nonzero(on)), n[on]], axis=1)
         offset, slot_len = np.linalg.lstsq(A, t[on] - (c + role[on] * STATION_OFFSET_SLOTS)
                                            * slot_len, rcond=None)[0]
         c = c + offset / slot_len
         phase = np.mod(t / slot_len, 1.0)
-        role[:] = -1
+    role[:] = -1
     for r in (0, 1):
         role[near(phase, np.array([c + r * STATION_OFFSET_SLOTS]), tol)[:, 0]] = r
     keep = role >= 0
