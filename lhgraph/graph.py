@@ -49,7 +49,7 @@ class GraphOptions:
     """Solver settings (units in the names; defaults suit 2 MHz LH1 captures).
 
     ``angle_sigma_rad``: per-diode angle noise (the floor when ``adapt_angle_sigma``: then the
-    rounds also raise it to the residuals' robust spread, at most ``max_sigma_factor`` times);
+    updates also raise it to the residuals' robust spread, at most ``max_sigma_factor`` times);
     ``sweep_offset_sigma_rad``: noise common to all diodes of one sweep (the sampled sync
     edge); ``loss``: per-diode robust loss (``"cauchy"`` or ``"huber"``) and ``huber_k``
     its scale in sigmas;
@@ -169,9 +169,9 @@ def _station_path(board: Board, angles: Angles, problem: GraphProblem, slot: int
 def _station_paths(board: Board, angles: Angles, problem: GraphProblem
                    ) -> list[tuple[Array, Array, Array]]:
     """Every station slot's path, the stations in parallel threads (numpy releases the GIL
-    in its array loops: 1.35x on two cores)."""
+    in its array loops)."""
     slots = range(len(problem.station_ids))
-    with ThreadPoolExecutor(max_workers=min(len(slots), os.cpu_count() or 1)) as pool:
+    with ThreadPoolExecutor(max_workers=min(len(slots), len(os.sched_getaffinity(0)))) as pool:
         return list(pool.map(partial(_station_path, board, angles, problem), slots))
 
 
@@ -499,7 +499,8 @@ def _update_noise_levels(ev: _Evaluator, options: GraphOptions,
     matches how the board actually moved) and the diodes' noise to the residuals' robust
     spread. Returns whether anything changed (False: both match the data or sit at their
     bounds)."""
-    ratio = float(np.clip(ev.motion_chi2_per_dof(), 1e-3, 1e3))
+    chi2 = ev.motion_chi2_per_dof()
+    ratio = float(np.clip(chi2, 1e-3, 1e3))
     if not options.adapt_motion_prior:
         ratio = 1.0
     # a model misfit shows up as board jitter: never loosen the prior beyond the cap
@@ -516,7 +517,8 @@ def _update_noise_levels(ev: _Evaluator, options: GraphOptions,
                               options.max_sigma_factor * options.angle_sigma_rad)
                       / ev.angle_sigma())**2
     if progress:
-        progress(f"motion prior: chi2/dof {ratio:.3g}; angle noise {sigma_hat * 1e6:.1f} urad")
+        progress(f"motion prior: chi2/dof {chi2:.3g} (PSD scaled by {ratio:.3g}); angle noise "
+                 f"{sigma_hat * 1e6:.1f} urad")
     if 0.8 < ratio < 1.25 and 0.8 < noise < 1.25:
         return False
     ev.scale_motion_prior(ratio)
@@ -551,12 +553,14 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
     Each iteration linearises the graph (GTSAM calls the factors, which slice the
     evaluator's vectorised Jacobians), eliminates it in ``ordering`` and steps; the error is
     the evaluator's numpy cost. While the noise levels adapt (``options.adapt_motion_prior``
-    / ``adapt_angle_sigma``, at most ``motion_prior_rounds`` updates), each accepted step is
-    followed by a variance-component update. Converged: an iteration left the noise levels
-    as they were and either lowered the error by less than ``options.relative_tolerance`` or
-    left the stations within ``options.step_tolerance_sigma`` standard deviations of where
-    the iteration converges to (per coordinate, estimated from how fast the steps shrink:
-    :func:`_remaining_sigmas`; the stations are what the solve is for).
+    / ``adapt_angle_sigma``), every accepted step is followed by a variance-component update
+    (at most ``motion_prior_rounds`` of them change the levels). Converged: an iteration left
+    the noise levels as they were and either lowered the error by less than
+    ``options.relative_tolerance`` or left the stations within
+    ``options.step_tolerance_sigma`` standard deviations of where the iteration converges to
+    (per coordinate, estimated from how fast the steps shrink: :func:`_remaining_sigmas`;
+    the stations are what the solve is for). Stalled (returned as not converged, before
+    ``max_iterations``): no step lowers the error, even damped.
 
     GTSAM's own optimisers copy the whole ``Values`` for every Python factor callback (7 s
     instead of 0.5 s for an 8 s capture); linearising a Python-owned ``Values`` does not.
@@ -591,22 +595,23 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
             values, error = candidate, new_error
             lam = lam / 10.0 if lam > 1e-6 else 0.0
         ev.error_history.append(error)
+        if not accepted:  # no descent even with the strongest damping: stalled
+            break
         rescaled = False
         if updates > 0:
-            updates -= 1
             ev.at(values)
             rescaled = _update_noise_levels(ev, options, progress)
             if rescaled:
+                updates -= 1
                 error = ev.cost(values)
-            else:
-                updates = 0  # matched: the levels stay
         remaining = _remaining_sigmas(station_step, previous_step)
         small = (improvement < options.relative_tolerance * max(error, 1.0)
-                 or (accepted and remaining < options.step_tolerance_sigma))
+                 or remaining < options.step_tolerance_sigma)
         if small and not rescaled:
             converged = True
             break
-        previous_step = station_step if accepted and not rescaled else None
+        # a damped step is measured against damped marginals: no basis for a rate
+        previous_step = None if rescaled or damped else station_step
     usable = converged and not damped
     return LMOutcome(values, iterations, error, converged, tree if usable else None)
 
@@ -620,8 +625,9 @@ def _with(a: gtsam.GaussianFactorGraph, b: gtsam.GaussianFactorGraph
 
 
 def _isam2(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, options: GraphOptions,
-           progress: Progress | None) -> tuple[gtsam.Values, int]:
-    """Batch solve with iSAM2: all factors, then updates until the error stops falling."""
+           progress: Progress | None) -> tuple[gtsam.Values, int, bool]:
+    """Batch solve with iSAM2: all factors, then updates until the error stops falling;
+    returns the values, the updates made and whether the error stopped falling."""
     params = gtsam.ISAM2Params()
     params.setRelinearizeThreshold(1e-9)
     params.relinearizeSkip = 1
@@ -635,9 +641,9 @@ def _isam2(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, options: Gra
         if progress:
             progress(f"iteration {iterations}: error {error:.6g}")
         if previous - error < 1e-6 * max(previous, 1.0):
-            break
+            return isam.calculateEstimate(), iterations, True
         previous = error
-    return isam.calculateEstimate(), iterations
+    return isam.calculateEstimate(), iterations, False
 
 
 def _optimise(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, problem: GraphProblem,
@@ -658,10 +664,10 @@ def _optimise(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, problem: 
             result, iterations, error = fit.values, fit.iterations, fit.error
             converged, tree = fit.converged, fit.tree
         else:
-            result, iterations = _isam2(graph, values, options, progress)
+            result, iterations, converged = _isam2(graph, values, options, progress)
             result = gtsam.Values(result)
             error = graph.error(result)
-            converged, tree = iterations < options.max_iterations, None
+            tree = None
         if tree is None:
             tree = graph.linearize(result).eliminateMultifrontal(ordering)
         cov = {slot: tree.marginalCovariance(L(slot))
@@ -725,7 +731,8 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         stations=Stations(reference, out),
         trajectory=Trajectory(problem.state_time, ev.X.copy()),
         residuals=residuals,
-        status="converged" if converged else "max_iterations",
+        status=("converged" if converged else "max_iterations"
+                if iterations >= options.max_iterations else "stalled"),
         iterations=iterations,
         final_error=float(final_error),
         timings_s=timings,
