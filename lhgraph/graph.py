@@ -60,8 +60,10 @@ class GraphOptions:
     ``max_psd_factor``] times the start); ``solver``:
     ``"lm"`` (Levenberg-Marquardt on GTSAM's linear solver) or ``"isam2"``;
     ``max_iterations``; LM stops when the stations are estimated to be within
-    ``step_tolerance_sigma`` of their standard deviations from the converged solution or an
-    iteration lowers the error by less than the fraction ``relative_tolerance``;
+    ``step_tolerance_sigma`` of their standard deviations from the converged solution and no
+    board state moved by more than ``board_step_tolerance_rad`` and ``board_step_tolerance_m``
+    in the last iteration, or an iteration lowers the error by less than the fraction
+    ``relative_tolerance``;
     ``reference``: station index of the world frame (default: the lowest index present).
     """
 
@@ -81,6 +83,8 @@ class GraphOptions:
     max_iterations: int = 30
     relative_tolerance: float = 1e-5
     step_tolerance_sigma: float = 0.05
+    board_step_tolerance_rad: float = 1e-3
+    board_step_tolerance_m: float = 1e-4
     reference: int | None = None
     weak_link_sigma_m: float = 0.02
 
@@ -534,6 +538,15 @@ def _station_step_sigmas(tree: gtsam.GaussianBayesTree, delta: gtsam.VectorValue
     return float(np.max(steps))
 
 
+def _board_steps(delta: gtsam.VectorValues, n_states: int) -> tuple[float, float]:
+    """Largest rotation (rad) and translation (m) step of any board state. ``delta`` holds
+    the keys in GTSAM's key order (symbol character, then index: b, l, v, x), so the board
+    poses' 6-vectors are its last ``6 n_states`` entries."""
+    step = delta.vector()[-6 * n_states:].reshape(n_states, 6)
+    return (float(np.max(np.linalg.norm(step[:, :3], axis=1))),
+            float(np.max(np.linalg.norm(step[:, 3:], axis=1))))
+
+
 def _remaining_sigmas(step: float, previous: float | None) -> float:
     """How far (in standard deviations) the stations still are from convergence after a step
     of ``step``: converging linearly at the rate ``rho = step / previous`` the steps still to
@@ -558,8 +571,9 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
     the noise levels as they were and either lowered the error by less than
     ``options.relative_tolerance`` or left the stations within
     ``options.step_tolerance_sigma`` standard deviations of where the iteration converges to
-    (per coordinate, estimated from how fast the steps shrink: :func:`_remaining_sigmas`;
-    the stations are what the solve is for). Stalled (returned as not converged, before
+    (per coordinate, estimated from how fast the steps shrink: :func:`_remaining_sigmas`)
+    while no board state moved by more than ``options.board_step_tolerance_rad`` /
+    ``_m`` (the path is an output too). Stalled (returned as not converged, before
     ``max_iterations``): no step lowers the error, even damped.
 
     GTSAM's own optimisers copy the whole ``Values`` for every Python factor callback (7 s
@@ -605,8 +619,11 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
                 updates -= 1
                 error = ev.cost(values)
         remaining = _remaining_sigmas(station_step, previous_step)
+        board_rad, board_m = _board_steps(delta, ev.p.n_states)
+        board_settled = (board_rad < options.board_step_tolerance_rad
+                         and board_m < options.board_step_tolerance_m)
         small = (improvement < options.relative_tolerance * max(error, 1.0)
-                 or remaining < options.step_tolerance_sigma)
+                 or (remaining < options.step_tolerance_sigma and board_settled))
         if small and not rescaled:
             converged = True
             break

@@ -8,12 +8,13 @@ from pathlib import Path
 import gtsam
 import numpy as np
 import pytest
-from gtsam.symbol_shorthand import L
+from gtsam.symbol_shorthand import L, X
 
 from lhgraph.angles import Angles
 from lhgraph.errors import SolverError
 from lhgraph.graph import (
     GraphOptions,
+    _board_steps,
     _levenberg_marquardt,
     _optimise,
     _remaining_sigmas,
@@ -263,3 +264,17 @@ def test_remaining_distance_sums_the_geometric_tail():
     assert _remaining_sigmas(0.4, 0.5) == pytest.approx(1.6)
     assert _remaining_sigmas(0.3, None) == 0.3
     assert _remaining_sigmas(0.3, 0.2) == 0.3
+
+
+def test_board_steps_are_read_from_the_board_poses():
+    """``_board_steps`` takes the board poses' part of a step vector by GTSAM's key order;
+    checked against reading every ``X(k)`` by key, with stations, twists and offsets present."""
+    sim = _capture("default", duration_s=0.5)
+    problem = build_problem(sim.board, sim.angles, {}, 0)
+    graph, _ = build_graph(problem, GraphOptions())
+    values = initial_values(initialise(sim.board, sim.angles, problem))
+    delta = graph.linearize(values).optimize()
+    steps = np.array([delta.at(X(k)) for k in range(problem.n_states)])
+    rad, m = _board_steps(delta, problem.n_states)
+    assert rad == pytest.approx(np.linalg.norm(steps[:, :3], axis=1).max(), rel=1e-12)
+    assert m == pytest.approx(np.linalg.norm(steps[:, 3:], axis=1).max(), rel=1e-12)
