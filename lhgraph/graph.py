@@ -80,7 +80,7 @@ class GraphOptions:
     min_psd_factor: float = 0.2
     motion_prior_rounds: int = 5
     solver: str = "lm"
-    max_iterations: int = 30
+    max_iterations: int = 60
     relative_tolerance: float = 1e-5
     step_tolerance_sigma: float = 0.05
     board_step_tolerance_rad: float = 1e-3
