@@ -149,9 +149,15 @@ def _rotation(w: Array) -> Array:
     ])
 
 
+def _angle_errors(p: Array, measured: Array) -> Array:
+    """``C - M``: ideal ``[az, el]`` (rad) of station-frame points ``(n, 3)`` minus the
+    measured ones ``(n, 2)``."""
+    return np.arctan2(p[:, 1:], p[:, :1]) - measured
+
+
 def _angle_cost(p: Array, measured: Array) -> float:
     """``sum (C - M)^2`` of station-frame points ``(n, 3)`` vs measured ``[az, el]`` ``(n, 2)``."""
-    d = np.arctan2(p[:, 1:], p[:, :1]) - measured
+    d = _angle_errors(p, measured)
     return float(np.einsum("ij,ij->", d, d))
 
 
@@ -491,8 +497,7 @@ def refine_station_pose(T_ref_lh: ArrayLike, meas: Measurements, trajectory: Tra
         evaluations, iterations = evaluations + int(res.nfev), iterations + int(res.nit)
         if fit == MAX_K2_FITS or not math.isfinite(options.outlier_mads):
             break
-        local = (world - T[:3, 3]) @ T[:3, :3]
-        d = np.arctan2(local[:, 1:], local[:, :1]) - measured
+        d = _angle_errors((world - T[:3, 3]) @ T[:3, :3], measured)
         square = np.bincount(rows, weights=np.einsum("ij,ij->i", d, d), minlength=len(meas))
         now = np.zeros(len(meas), dtype=bool)
         now[seen] = outliers(np.sqrt(square[seen] / (2 * per_meas[seen])), options.outlier_mads)

@@ -304,10 +304,14 @@ class _Evaluator:
         self.e = self.e_raw * self.motion_scale
         self._jacobians_ready = False
 
+    def _motion_chi2(self) -> Array:
+        """Whitened squared residual ``e^T Q^-1 e`` of every motion prior (K-1,)."""
+        return np.einsum("ki,kij,kj->k", self.e, self._Q_inv, self.e)
+
     def motion_chi2_per_dof(self) -> float:
         """Mean whitened squared motion-prior residual per degree of freedom under the current
         prior (1 if its strength matches the solved motion)."""
-        return float(np.mean(np.einsum("ki,kij,kj->k", self.e, self._Q_inv, self.e)) / 12)
+        return float(np.mean(self._motion_chi2()) / 12)
 
     def angle_sigma(self) -> float:
         """Effective per-diode angle noise (rad) now."""
@@ -332,8 +336,7 @@ class _Evaluator:
             ax = np.abs(x)
             bearing = np.where(ax <= k, 0.5 * x**2, k * ax - 0.5 * k**2)
         offsets = 0.5 * (self.B / o.sweep_offset_sigma_rad) ** 2
-        motion = 0.5 * np.einsum("ki,kij,kj->k", self.e, self._Q_inv, self.e)
-        return float(bearing.sum() + offsets.sum() + motion.sum())
+        return float(bearing.sum() + offsets.sum() + 0.5 * self._motion_chi2().sum())
 
     def at(self, values: gtsam.Values) -> None:
         """Evaluate the residuals at ``values`` unless they are the cached point."""
