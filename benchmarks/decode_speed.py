@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from lhgraph.capture import read_capture, read_raw_dump, write_capture
-from lhgraph.capture_sim import CaptureOptions, synthesize_capture
-from lhgraph.decode import DecodeOptions, decode_capture, decode_pulses
-from lhgraph.libsurvive import read_libsurvive
-from lhgraph.simulate import default_simulation_config, simulate
+from lhgraph.signal.capture import read_capture, read_raw_dump, write_capture
+from lhgraph.signal.decode import DecodeOptions, decode_capture, decode_pulses
+from lhgraph.signal.libsurvive import read_libsurvive
+from lhgraph.sim.capture_sim import CaptureOptions, synthesize_capture
+from lhgraph.sim.simulate import default_simulation_config, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 LIBSURVIVE = ROOT.parent / "shared" / "data" / "libsurvive-lh1" / "lh1_test_cal.rec.gz"

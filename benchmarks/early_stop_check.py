@@ -20,10 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from lhgraph.fileio import check_writable
-from lhgraph.graph import GraphOptions, solve_graph
-from lhgraph.simulate import load_simulation_config, simulate
-from lhgraph.transforms import inverse, se3_log
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.geometry.transforms import inverse, se3_log
+from lhgraph.io.files import check_writable
+from lhgraph.sim.simulate import load_simulation_config, simulate
 
 ROOT = Path(__file__).resolve().parent.parent
 LAYOUTS = ("default", "facing", "ninety", "fast", "far", "realistic")

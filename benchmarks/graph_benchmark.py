@@ -36,23 +36,23 @@ import numpy as np  # noqa: E402
 from joblib import Parallel, delayed  # noqa: E402
 from joblib.externals.loky import get_reusable_executor  # noqa: E402
 
-from lhgraph.fileio import check_writable  # noqa: E402
-from lhgraph.graph import solve_graph  # noqa: E402
-from lhgraph.simulate import (  # noqa: E402
+from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
+from lhgraph.estimation.graph.streaming import StreamingSolver, cycles  # noqa: E402
+from lhgraph.geometry.transforms import inverse, rotation_angle, se3_log  # noqa: E402
+from lhgraph.io.files import check_writable  # noqa: E402
+from lhgraph.sim.simulate import (  # noqa: E402
     SimulationConfig,
     load_simulation_config,
     paper_protocol,
     simulate,
     write_simulation,
 )
-from lhgraph.streaming import StreamingSolver, cycles  # noqa: E402
-from lhgraph.study import (  # noqa: E402
+from lhgraph.workflow.study import (  # noqa: E402
     PAPER_MAE,
     protocol_statistics,
     signed_errors,
     table_iii_markdown,
 )
-from lhgraph.transforms import inverse, rotation_angle, se3_log  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -79,7 +79,7 @@ def run_one(name: str, config: SimulationConfig, seed: int | None = None) -> dic
 
 
 def protocol_table(rows: list[dict]) -> list[str]:
-    """Table III layout (lhgraph.study, shared with `lhgraph study`) and the MAE ratio."""
+    """Table III layout (lhgraph.workflow.study, shared with `lhgraph study`) and the MAE ratio."""
     stats = protocol_statistics([r["name"] for r in rows], [r["signed"] for r in rows])
     lines = table_iii_markdown({"graph": stats})
     ratio = np.array(PAPER_MAE) / stats.mae

@@ -24,13 +24,13 @@ from pathlib import Path
 
 import numpy as np
 
-from lhgraph.decode import decode_file
-from lhgraph.fileio import check_writable
-from lhgraph.graph import solve_graph
-from lhgraph.gravity import to_gravity_world, up_vectors
-from lhgraph.libsurvive import read_libsurvive_board, read_libsurvive_poses
-from lhgraph.solve import models_of
-from lhgraph.transforms import inverse, rotation_angle
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.gravity import to_gravity_world, up_vectors
+from lhgraph.geometry.transforms import inverse, rotation_angle
+from lhgraph.io.files import check_writable
+from lhgraph.signal.decode import decode_file
+from lhgraph.signal.libsurvive import read_libsurvive_board, read_libsurvive_poses
+from lhgraph.workflow.solve import models_of
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT = ROOT.parent / "shared/data/libsurvive-lh1/lh1_test_cal.rec.gz"
@@ -100,7 +100,8 @@ def main() -> int:
               "libsurvive's world +z in the station's native frame: "
               + ", ".join(f"station {k}: {angle_deg(accel[k], native_up[k]):.2f} deg"
                           for k in sorted(accel)) + ".",
-              "", f"With the mapping of `lhgraph.gravity` (`(-z, -x, +y)`), the gravity-aligned "
+              "", f"With the mapping of `lhgraph.estimation.gravity` (`(-z, -x, +y)`), the "
+              "gravity-aligned "
               f"world's spread: {aligned.diagnostics['gravity_spread_deg']:.2f} deg.", ""]
     out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -22,15 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
-from lhgraph.hive import (
+from lhgraph.geometry.transforms import so3_log
+from lhgraph.importers.hive import (
     HIVE_MAPPING,
     fit_sweep_pairs,
     read_hive_bag,
     station_calibrations,
     sweep_pairs,
 )
-from lhgraph.model import Convention, StationModel
-from lhgraph.transforms import so3_log
+from lhgraph.model.lh1 import Convention, StationModel
 
 ROOT = Path(__file__).resolve().parents[1]
 BAG = ROOT.parent / "shared/data/hive-env8/data8.11.bag"
@@ -109,7 +109,8 @@ def main() -> None:
         "",
         f"`python3 benchmarks/hive_conventions.py --pairs {args.pairs}` — {len(pairs)} sweep "
         "pairs (≥ 12 hits) of data8.11.bag, single-station PnP per pair "
-        "(`lhgraph.hive.single_station_pnp`, axis mapping az=+h el=+v), OOTX terms from the bag "
+        "(`lhgraph.importers.hive.single_station_pnp`, axis mapping az=+h el=+v), OOTX terms "
+        "from the bag "
         "(hive horizontal motor → axis 0).",
         "",
         "| model | rms (µrad) | median (µrad) | rms lh0 | rms lh1 | fits |",

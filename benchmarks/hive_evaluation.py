@@ -6,21 +6,21 @@ Imports ``data8.11.bag`` (read from ../shared, never copied) into a temporary fo
 
 1. factory-calibration sign convention: the joint graph solve with no calibration and with
    the four (gib, curve) sign conventions, on the whole bag and on 8 s slices from the start
-   of motion (:func:`lhgraph.window.moving_window`), by inlier residual rms and inlier
+   of motion (:func:`lhgraph.workflow.window.moving_window`), by inlier residual rms and inlier
    fraction;
 2. graph vs paper baseline, without and with the best calibration: residuals, the second
    station's pose, its spread over the 8 s slices against the whole-bag solution;
 3. the board trajectory against OptiTrack after a world + hand-eye + time-offset alignment
-   (:func:`lhgraph.hive.align_to_mocap`);
+   (:func:`lhgraph.importers.hive.align_to_mocap`);
 4. each station's own PnP path (one station, no graph) against OptiTrack, on the whole bag
    and the first slice: what one station's view alone gives.
 
-The graph runs twice: with its own initialiser (``lhgraph.pnp.board_poses``) and with the
-non-planar PnP (:func:`lhgraph.hive.tracker_board_poses`) swapped in. The planar initialiser
-used to land in mirror poses on the curved tracker; since it fits the plane of the seen
-sensors both give the same solution (docs/results/hive_evaluation.md), so the second run is
-a cross-check of the initialiser. Writes the markdown
-to ``--output`` (default docs/results/hive_evaluation.md) and prints it.
+The graph runs twice: with its own initialiser (``lhgraph.estimation.init.pnp.board_poses``)
+and with the non-planar PnP (:func:`lhgraph.importers.hive.tracker_board_poses`) swapped in.
+The planar initialiser used to land in mirror poses on the curved tracker; since it fits the
+plane of the seen sensors both give the same solution (docs/results/hive_evaluation.md), so
+the second run is a cross-check of the initialiser. Writes the markdown to ``--output``
+(default docs/results/hive_evaluation.md) and prints it.
 """
 
 from __future__ import annotations
@@ -33,19 +33,21 @@ from unittest import mock
 
 import numpy as np
 
-from lhgraph.angles import Angles, load_angles
-from lhgraph.baseline import solve_paper
-from lhgraph.board import Board, load_board
 from lhgraph.errors import LhgraphError
-from lhgraph.graph import GraphOptions, consistent_path, solve_graph
-from lhgraph.hive import align_to_mocap, import_hive, tracker_board_poses
-from lhgraph.metrics import station_errors
-from lhgraph.model import Convention, StationModel
-from lhgraph.reconstruct import reconstruct_measurements
-from lhgraph.result import SolveResult
-from lhgraph.solve import station_models
-from lhgraph.trajectory import Trajectory, load_trajectory
-from lhgraph.window import motion_start
+from lhgraph.estimation.baseline import solve_paper
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.init.pnp_kabsch import consistent_path
+from lhgraph.estimation.reconstruct import reconstruct_measurements
+from lhgraph.estimation.result import SolveResult
+from lhgraph.importers.hive import align_to_mocap, import_hive, tracker_board_poses
+from lhgraph.io.angles import Angles, load_angles
+from lhgraph.io.trajectory import Trajectory, load_trajectory
+from lhgraph.model.board import Board, load_board
+from lhgraph.model.lh1 import Convention, StationModel
+from lhgraph.workflow.metrics import station_errors
+from lhgraph.workflow.solve import station_models
+from lhgraph.workflow.window import motion_start
 
 REPO = Path(__file__).resolve().parents[1]
 BAG = REPO.parent / "shared/data/hive-env8/data8.11.bag"
@@ -70,7 +72,7 @@ def run(method: str, board: Board, angles: Angles, models: dict[int, StationMode
         if method == "paper":
             result = solve_paper(board, angles, models)
         elif method == "graph+tracker-init":
-            with mock.patch("lhgraph.graph.board_poses", tracker_board_poses):
+            with mock.patch("lhgraph.estimation.graph.solver.board_poses", tracker_board_poses):
                 result = solve_graph(board, angles, models, options)
         else:
             result = solve_graph(board, angles, models, options)
@@ -121,7 +123,7 @@ def main() -> None:
              f"data8.11.bag ({len(angles)} hits, motion from {t0:.1f} s). Graph = "
              "`solve_graph` with default options (the convention table alone fixes the "
              "per-diode sigma at 40 µrad, so that inlier fractions compare); *tracker init* = "
-             "the same with `lhgraph.hive.tracker_board_poses` replacing the planar PnP "
+             "the same with `lhgraph.importers.hive.tracker_board_poses` replacing the planar PnP "
              "initialiser. "
              "rms = inlier (robust weight > 0.5) residual rms; median = median |residual| of "
              "all hits; trajectory = `align_to_mocap` (world + hand-eye + time offset, "
@@ -191,7 +193,8 @@ def main() -> None:
     # 4. each station's own PnP path (no graph, no other station) against OptiTrack
     lines += ["", "## Each station's own path vs OptiTrack", "",
               "Per-measurement poses `T_lh_board` of one station alone "
-              "(`lhgraph.hive.tracker_board_poses` on the merged az/el pairs, path filter of the "
+              "(`lhgraph.importers.hive.tracker_board_poses` on the merged az/el pairs, "
+              "path filter of the "
               "graph initialiser), aligned like the trajectories above: how well each station's "
               "view alone can give the path.", "",
               "| span | station | poses | median rms µrad | RMSE mm | deg | time offset ms |",

@@ -1,6 +1,7 @@
 """Evidence of a per-sweep angle offset in the hive recording's station 1 (raw data, no solve).
 
-While the tracker rests (before the motion starts, :func:`lhgraph.window.motion_start`), every
+While the tracker rests (before the motion starts,
+:func:`lhgraph.workflow.window.motion_start`), every
 sensor's true angle is constant, so each sweep's *common* deviation (the mean over its hits of
 angle minus that sensor's median angle at rest) shows any offset shared by all diodes of the
 sweep. Station 1's sweeps take one of two levels about 7.8 mrad apart; station 0's do not.
@@ -25,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from lhgraph.angles import load_angles
-from lhgraph.fileio import check_writable
-from lhgraph.hive import import_hive
-from lhgraph.window import motion_start
+from lhgraph.importers.hive import import_hive
+from lhgraph.io.angles import load_angles
+from lhgraph.io.files import check_writable
+from lhgraph.workflow.window import motion_start
 
 REPO = Path(__file__).resolve().parents[1]
 BAG = REPO.parent / "shared/data/hive-env8/data8.11.bag"

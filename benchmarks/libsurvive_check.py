@@ -21,13 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from lhgraph.decode import decode_file
-from lhgraph.fileio import check_writable
-from lhgraph.graph import solve_graph
-from lhgraph.libsurvive import read_libsurvive_board, read_libsurvive_poses
-from lhgraph.model import Convention
-from lhgraph.solve import models_of
-from lhgraph.transforms import inverse, rotation_angle
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.geometry.transforms import inverse, rotation_angle
+from lhgraph.io.files import check_writable
+from lhgraph.model.lh1 import Convention
+from lhgraph.signal.decode import decode_file
+from lhgraph.signal.libsurvive import read_libsurvive_board, read_libsurvive_poses
+from lhgraph.workflow.solve import models_of
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT = ROOT.parent / "shared/data/libsurvive-lh1/lh1_test_cal.rec.gz"

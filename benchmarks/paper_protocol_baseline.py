@@ -1,7 +1,8 @@
 """The paper's simulation protocol run with the paper's method (``solve_paper``).
 
 Simulates every capture of ``configs/paper_simulation.toml`` (10 setups x 5 measurements,
-quantisation noise only), calibrates it with :func:`lhgraph.baseline.solve_paper` and prints
+quantisation noise only), calibrates it with :func:`lhgraph.estimation.baseline.solve_paper`
+and prints
 the paper's Table III layout (MAE and average per-setup SD of X, Y, Z in mm and alpha, beta,
 gamma in degrees) next to the paper's own figures, plus the median run time per capture.
 
@@ -30,11 +31,11 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from joblib import Parallel, delayed  # noqa: E402
 
-from lhgraph.baseline import PaperOptions, solve_paper  # noqa: E402
 from lhgraph.errors import LhgraphError  # noqa: E402
-from lhgraph.fileio import check_writable  # noqa: E402
-from lhgraph.simulate import SimulationConfig, paper_protocol, simulate  # noqa: E402
-from lhgraph.study import (  # noqa: E402
+from lhgraph.estimation.baseline import PaperOptions, solve_paper  # noqa: E402
+from lhgraph.io.files import check_writable  # noqa: E402
+from lhgraph.sim.simulate import SimulationConfig, paper_protocol, simulate  # noqa: E402
+from lhgraph.workflow.study import (  # noqa: E402
     COLUMNS,
     PAPER_MAE,
     PAPER_SD,

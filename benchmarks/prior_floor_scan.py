@@ -27,15 +27,16 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from joblib import Parallel, delayed  # noqa: E402
 
-from lhgraph.fileio import check_writable  # noqa: E402
-from lhgraph.graph import GraphOptions, solve_graph  # noqa: E402
-from lhgraph.simulate import (  # noqa: E402
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.geometry.transforms import inverse, se3_log  # noqa: E402
+from lhgraph.io.files import check_writable  # noqa: E402
+from lhgraph.sim.simulate import (  # noqa: E402
     SimulationConfig,
     load_simulation_config,
     paper_protocol,
     simulate,
 )
-from lhgraph.transforms import inverse, se3_log  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SPEEDS = (0.2, 0.5, 1.0, 2.0)

@@ -11,7 +11,7 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 
-from .errors import LhgraphError
+from lhgraph.errors import LhgraphError
 
 Runner = Callable[[argparse.Namespace], int]
 
@@ -46,7 +46,7 @@ def add_simulate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run_simulate(args: argparse.Namespace) -> int:
-    from .simulate import (
+    from lhgraph.sim.simulate import (
         default_simulation_config,
         load_simulation_config,
         simulate,
@@ -57,8 +57,8 @@ def run_simulate(args: argparse.Namespace) -> int:
               else load_simulation_config(args.config))
     capture = simulate(config, args.seed)
     if args.capture:
-        from .capture_sim import CAPTURE_FILE, write_simulated_capture
-        from .fileio import check_writable
+        from lhgraph.io.files import check_writable
+        from lhgraph.sim.capture_sim import CAPTURE_FILE, write_simulated_capture
 
         check_writable(f"{args.output}/{CAPTURE_FILE}", args.force)
     paths = write_simulation(capture, args.output, overwrite=args.force)
@@ -102,12 +102,17 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run_solve(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from .errors import InputError
-    from .metrics import station_errors
-    from .report import print_solution
-    from .rundir import comparison_rows, format_comparison, is_run_directory, run_to_directory
-    from .solve import SolveConfig, load_solve_config, run_config, write_solution
-    from .stations import load_stations
+    from lhgraph.errors import InputError
+    from lhgraph.io.stations import load_stations
+    from lhgraph.report.text import print_solution
+    from lhgraph.workflow.metrics import station_errors
+    from lhgraph.workflow.rundir import (
+        comparison_rows,
+        format_comparison,
+        is_run_directory,
+        run_to_directory,
+    )
+    from lhgraph.workflow.solve import SolveConfig, load_solve_config, run_config, write_solution
 
     if args.config:
         config = load_solve_config(args.config)
@@ -183,8 +188,8 @@ def add_decode(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run_decode(args: argparse.Namespace) -> int:
-    from .board import load_board
-    from .decode import DecodeOptions, decode_file, write_decoded
+    from lhgraph.model.board import load_board
+    from lhgraph.signal.decode import DecodeOptions, decode_file, write_decoded
 
     board = load_board(args.board) if args.board else None
     period = args.period or ("nominal" if args.format == "libsurvive"
@@ -225,7 +230,7 @@ def add_capture(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run_capture(args: argparse.Namespace) -> int:
-    from .capture_client import ProgressBar, download_capture
+    from lhgraph.device.client import ProgressBar, download_capture
 
     bar = None if args.quiet else ProgressBar(sys.stderr)
     try:
@@ -258,7 +263,7 @@ def _add_import_hive(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_import_hive(args: argparse.Namespace) -> int:
-    from .hive import import_hive
+    from lhgraph.importers.hive import import_hive
 
     result = import_hive(args.bag, args.output, overwrite=args.force)
     if not args.quiet:
@@ -302,8 +307,8 @@ def add_study(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run_study(args: argparse.Namespace) -> int:
-    from .study import load_study_config
-    from .study import run_study as study
+    from lhgraph.workflow.study import load_study_config
+    from lhgraph.workflow.study import run_study as study
 
     progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
     result = study(load_study_config(args.config), args.output, args.jobs, args.scheduler,
@@ -335,7 +340,7 @@ def add_view(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run_view(args: argparse.Namespace) -> int:
-    from .viewer import build_scene, export, show
+    from lhgraph.report.viewer import build_scene, export, show
 
     scene = build_scene(args.run_dir)
     if args.export:

@@ -25,11 +25,11 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from lhgraph.angles import load_angles
-from lhgraph.board import load_board
-from lhgraph.hive import import_hive
-from lhgraph.report import format_solution
-from lhgraph.solve import solve, station_models
+from lhgraph.importers.hive import import_hive
+from lhgraph.io.angles import load_angles
+from lhgraph.model.board import load_board
+from lhgraph.report.text import format_solution
+from lhgraph.workflow.solve import solve, station_models
 
 REPO = Path.cwd().parent if Path.cwd().name == "notebooks" else Path.cwd()
 BAG = REPO.parent / "shared" / "data" / "hive-env8" / "data8.11.bag"

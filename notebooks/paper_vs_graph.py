@@ -23,10 +23,10 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from lhgraph.baseline import PaperOptions
-from lhgraph.simulate import paper_protocol, simulate
-from lhgraph.solve import solve
-from lhgraph.study import protocol_statistics, signed_errors, table_iii_markdown
+from lhgraph.estimation.baseline import PaperOptions
+from lhgraph.sim.simulate import paper_protocol, simulate
+from lhgraph.workflow.solve import solve
+from lhgraph.workflow.study import protocol_statistics, signed_errors, table_iii_markdown
 
 REPO = Path.cwd().parent if Path.cwd().name == "notebooks" else Path.cwd()
 CAPTURES = 2        # first captures of the protocol

@@ -30,7 +30,7 @@ def hive_bag(shared_data: Path) -> Path:
 @pytest.fixture(scope="session")
 def hive_import(hive_bag: Path, tmp_path_factory: pytest.TempPathFactory):
     """The bag imported once per test session: (HiveImport, output directory)."""
-    from lhgraph.hive import import_hive
+    from lhgraph.importers.hive import import_hive
 
     out = tmp_path_factory.mktemp("hive")
     return import_hive(hive_bag, out), out

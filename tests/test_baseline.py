@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lhgraph.angles import Angles
-from lhgraph.baseline import (
+from lhgraph.errors import InputError, SolverError
+from lhgraph.estimation.baseline import (
     BoardPoses,
     PaperOptions,
     estimate_board_pose,
@@ -19,14 +19,8 @@ from lhgraph.baseline import (
     refine_station_pose,
     solve_paper,
 )
-from lhgraph.boards import paper_board
-from lhgraph.errors import InputError, SolverError
-from lhgraph.metrics import station_errors
-from lhgraph.model import FactoryCalibration, StationModel, ideal_angles
-from lhgraph.reconstruct import Measurements, reconstruct_measurements
-from lhgraph.simulate import load_simulation_config, parse_simulation_config, simulate
-from lhgraph.trajectory import Trajectory
-from lhgraph.transforms import (
+from lhgraph.estimation.reconstruct import Measurements, reconstruct_measurements
+from lhgraph.geometry.transforms import (
     interpolate_poses,
     make_pose,
     matrix_to_quat,
@@ -34,6 +28,12 @@ from lhgraph.transforms import (
     so3_exp,
     transform_points,
 )
+from lhgraph.io.angles import Angles
+from lhgraph.io.trajectory import Trajectory
+from lhgraph.model.boards import paper_board
+from lhgraph.model.lh1 import FactoryCalibration, StationModel, ideal_angles
+from lhgraph.sim.simulate import load_simulation_config, parse_simulation_config, simulate
+from lhgraph.workflow.metrics import station_errors
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "configs" / "simulation" / "default.toml"

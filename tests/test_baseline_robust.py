@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lhgraph.angles import Angles
-from lhgraph.baseline import (
+from lhgraph.errors import InputError
+from lhgraph.estimation.baseline import (
     BoardPoses,
     PaperOptions,
     outliers,
@@ -21,14 +21,14 @@ from lhgraph.baseline import (
     reject_outlier_poses,
     solve_paper,
 )
-from lhgraph.boards import paper_board
-from lhgraph.errors import InputError
-from lhgraph.metrics import station_errors
-from lhgraph.model import ideal_angles
-from lhgraph.reconstruct import Measurements
-from lhgraph.simulate import load_simulation_config, simulate
-from lhgraph.trajectory import Trajectory
-from lhgraph.transforms import make_pose, rotation_angle, so3_exp, transform_points
+from lhgraph.estimation.reconstruct import Measurements
+from lhgraph.geometry.transforms import make_pose, rotation_angle, so3_exp, transform_points
+from lhgraph.io.angles import Angles
+from lhgraph.io.trajectory import Trajectory
+from lhgraph.model.boards import paper_board
+from lhgraph.model.lh1 import ideal_angles
+from lhgraph.sim.simulate import load_simulation_config, simulate
+from lhgraph.workflow.metrics import station_errors
 
 DEFAULT = Path(__file__).resolve().parent.parent / "configs" / "simulation" / "default.toml"
 BOARD = paper_board()

@@ -5,9 +5,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lhgraph.board import load_board
-from lhgraph.boards import BUILTIN_BOARDS, board_by_name, paper_board, pyramid_board
 from lhgraph.errors import InputError
+from lhgraph.model.board import load_board
+from lhgraph.model.boards import BUILTIN_BOARDS, board_by_name, paper_board, pyramid_board
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs" / "boards"
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from lhgraph.capture_client import (
+from lhgraph.device.client import (
     CMD_READ,
     RESP_FLAG,
     BoardStatus,
@@ -269,8 +269,8 @@ def test_device_failure_exit_1_and_no_partial_file(virtual_board: Path,
 
 
 def test_download_reads_back_with_lhgraph_capture(virtual_board: Path, tmp_path: Path) -> None:
-    """A file written by lhgraph.capture goes through the board and reads back unchanged."""
-    capmod = pytest.importorskip("lhgraph.capture")
+    """A file written by lhgraph.signal.capture goes through the board and reads back unchanged."""
+    capmod = pytest.importorskip("lhgraph.signal.capture")
     np = pytest.importorskip("numpy")
     rnd = np.random.default_rng(7)
     idx = np.concatenate([[0], np.cumsum(rnd.integers(1, 400, size=1999))])

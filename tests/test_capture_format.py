@@ -10,7 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lhgraph.capture import (
+from lhgraph.errors import InputError
+from lhgraph.signal.capture import (
     Capture,
     decode_capture_bytes,
     edges_from_words,
@@ -21,8 +22,7 @@ from lhgraph.capture import (
     read_raw_dump,
     write_capture,
 )
-from lhgraph.errors import InputError
-from lhgraph.signal import LightPulses
+from lhgraph.signal.pulses import LightPulses
 
 
 def _dense(sensor, start, end, length, channel_map=None):

@@ -9,26 +9,26 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lhgraph.calibration import StationCalibration, load_calibration
-from lhgraph.capture import (
+from lhgraph.cli import main
+from lhgraph.model.calibration import StationCalibration, load_calibration
+from lhgraph.model.lh1 import CALIBRATION_KEYS, FactoryCalibration
+from lhgraph.signal.capture import (
     Capture,
     edges_to_pulses,
     encode_capture,
     pulses_to_edges,
     write_capture,
 )
-from lhgraph.capture_sim import CaptureOptions, synthesize_capture
-from lhgraph.cli import main
-from lhgraph.decode import (
+from lhgraph.signal.decode import (
     DecodeOptions,
     decode_capture,
     decode_file,
     decode_pulses,
     merge_carrier_gaps,
 )
-from lhgraph.model import CALIBRATION_KEYS, FactoryCalibration
-from lhgraph.signal import LightPulses
-from lhgraph.simulate import default_simulation_config, simulate
+from lhgraph.signal.pulses import LightPulses
+from lhgraph.sim.capture_sim import CaptureOptions, synthesize_capture
+from lhgraph.sim.simulate import default_simulation_config, simulate
 
 CALS = {
     0: StationCalibration(FactoryCalibration(phase=[0.0586, 0.0622], tilt=[0.0013, -0.0079],

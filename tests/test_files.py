@@ -9,15 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lhgraph.angles import Angles, load_angles, save_angles
-from lhgraph.board import load_board, make_board, save_board
-from lhgraph.calibration import StationCalibration, load_calibration, save_calibration
 from lhgraph.errors import InputError
-from lhgraph.metrics import station_errors
-from lhgraph.model import FactoryCalibration, StationModel
-from lhgraph.stations import Station, Stations, load_stations, save_stations
-from lhgraph.trajectory import Trajectory, load_trajectory, save_trajectory
-from lhgraph.transforms import se3_exp, so3_exp
+from lhgraph.geometry.transforms import se3_exp, so3_exp
+from lhgraph.io.angles import Angles, load_angles, save_angles
+from lhgraph.io.stations import Station, Stations, load_stations, save_stations
+from lhgraph.io.trajectory import Trajectory, load_trajectory, save_trajectory
+from lhgraph.model.board import load_board, make_board, save_board
+from lhgraph.model.calibration import StationCalibration, load_calibration, save_calibration
+from lhgraph.model.lh1 import FactoryCalibration, StationModel
+from lhgraph.workflow.metrics import station_errors
 
 HEADER = "time,lighthouse,axis,sensor,angle\n"
 

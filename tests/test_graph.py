@@ -10,25 +10,24 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import L, X
 
-from lhgraph.angles import Angles
 from lhgraph.errors import SolverError
-from lhgraph.graph import (
-    GraphOptions,
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.solver import (
     _board_steps,
     _levenberg_marquardt,
     _optimise,
     _remaining_sigmas,
     build_graph,
-    build_problem,
-    consistent_path,
     elimination_ordering,
     initial_values,
-    initialise,
     solve_graph,
 )
-from lhgraph.metrics import station_errors
-from lhgraph.simulate import load_simulation_config, simulate
-from lhgraph.transforms import inverse, make_pose, se3_exp, se3_log, so3_exp
+from lhgraph.estimation.init.pnp_kabsch import consistent_path, initialise
+from lhgraph.estimation.problem import build_problem
+from lhgraph.geometry.transforms import inverse, make_pose, se3_exp, se3_log, so3_exp
+from lhgraph.io.angles import Angles
+from lhgraph.sim.simulate import load_simulation_config, simulate
+from lhgraph.workflow.metrics import station_errors
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "simulation"
 

@@ -8,24 +8,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lhgraph.board import load_board
-from lhgraph.capture_sim import default_calibrations
 from lhgraph.cli import main
-from lhgraph.decode import decode_file
 from lhgraph.errors import InputError
-from lhgraph.graph import solve_graph
-from lhgraph.gravity import (
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.gravity import (
     accel_dir_from_up,
     gravity_rotation,
     to_gravity_world,
     up_in_station,
     up_vectors,
 )
-from lhgraph.result import SolveResult
-from lhgraph.simulate import load_simulation_config, simulate
-from lhgraph.solve import models_of
-from lhgraph.stations import Station, Stations, load_stations
-from lhgraph.transforms import make_pose, so3_exp
+from lhgraph.estimation.result import SolveResult
+from lhgraph.geometry.transforms import make_pose, so3_exp
+from lhgraph.io.stations import Station, Stations, load_stations
+from lhgraph.model.board import load_board
+from lhgraph.signal.decode import decode_file
+from lhgraph.sim.capture_sim import default_calibrations
+from lhgraph.sim.simulate import load_simulation_config, simulate
+from lhgraph.workflow.solve import models_of
 
 ROOT = Path(__file__).resolve().parent.parent
 FIXTURE = ROOT / "tests" / "data" / "libsurvive" / "lh1_test_cal_hmd_7s.rec.gz"

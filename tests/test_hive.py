@@ -9,12 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lhgraph.angles import load_angles
-from lhgraph.board import load_board
-from lhgraph.calibration import load_calibration
 from lhgraph.cli import main
-from lhgraph.fileio import read_csv_columns
-from lhgraph.hive import (
+from lhgraph.importers.hive import (
     CANDIDATE_MAPPINGS,
     HIVE_MAPPING,
     AxisMapping,
@@ -22,7 +18,11 @@ from lhgraph.hive import (
     off_grid_sweeps,
     read_hive_bag,
 )
-from lhgraph.trajectory import load_trajectory
+from lhgraph.io.angles import load_angles
+from lhgraph.io.files import read_csv_columns
+from lhgraph.io.trajectory import load_trajectory
+from lhgraph.model.board import load_board
+from lhgraph.model.calibration import load_calibration
 
 
 @pytest.fixture(scope="module")

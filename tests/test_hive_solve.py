@@ -21,19 +21,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lhgraph.angles import load_angles
-from lhgraph.board import load_board
-from lhgraph.graph import solve_graph
-from lhgraph.hive import (
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.init.pnp import board_poses
+from lhgraph.estimation.reconstruct import reconstruct_measurements
+from lhgraph.geometry.transforms import make_pose, pose_from_quat, se3_exp
+from lhgraph.importers.hive import (
     align_to_mocap,
     facing_fraction,
     tracker_board_poses,
 )
-from lhgraph.pnp import board_poses
-from lhgraph.reconstruct import reconstruct_measurements
-from lhgraph.trajectory import Trajectory, load_trajectory
-from lhgraph.transforms import make_pose, pose_from_quat, se3_exp
-from lhgraph.window import moving_window
+from lhgraph.io.angles import load_angles
+from lhgraph.io.trajectory import Trajectory, load_trajectory
+from lhgraph.model.board import load_board
+from lhgraph.workflow.window import moving_window
 
 
 @pytest.fixture(scope="module")

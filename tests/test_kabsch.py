@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from lhgraph.kabsch import weighted_kabsch
-from lhgraph.transforms import make_pose, so3_exp, transform_points
+from lhgraph.geometry.kabsch import weighted_kabsch
+from lhgraph.geometry.transforms import make_pose, so3_exp, transform_points
 
 
 def _random_pose(rng: np.random.Generator) -> np.ndarray:

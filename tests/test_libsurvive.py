@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from lhgraph.cli import main
-from lhgraph.decode import DecodeOptions, decode_pulses
 from lhgraph.errors import InputError
-from lhgraph.libsurvive import (
+from lhgraph.model.lh1 import CALIBRATION_KEYS
+from lhgraph.signal.decode import DecodeOptions, decode_pulses
+from lhgraph.signal.libsurvive import (
     match_angles,
     read_libsurvive,
     read_libsurvive_calibration,
 )
-from lhgraph.model import CALIBRATION_KEYS
 
 FIXTURE = Path(__file__).parent / "data" / "libsurvive" / "lh1_test_cal_hmd_7s.rec.gz"
 FULL = (Path(__file__).resolve().parents[2] / "shared" / "data" / "libsurvive-lh1"

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lhgraph.model import (
+from lhgraph.geometry.transforms import se3_exp
+from lhgraph.model.lh1 import (
     Convention,
     FactoryCalibration,
     StationModel,
@@ -14,7 +15,6 @@ from lhgraph.model import (
     predict,
     sweep_angle,
 )
-from lhgraph.transforms import se3_exp
 
 CAL = FactoryCalibration(phase=[0.05, -0.03], tilt=[0.01, -0.02], curve=[0.003, -0.004],
                          gibphase=[2.9, 0.02], gibmag=[0.005, -0.004])

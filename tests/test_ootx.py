@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lhgraph.calibration import StationCalibration
 from lhgraph.errors import InputError
-from lhgraph.model import FactoryCalibration
-from lhgraph.ootx import (
+from lhgraph.model.calibration import StationCalibration
+from lhgraph.model.lh1 import FactoryCalibration
+from lhgraph.signal.ootx import (
     PAYLOAD_LEN,
     OotxDecoder,
     OotxPayload,

@@ -7,12 +7,12 @@ from pathlib import Path
 
 import numpy as np
 
-from lhgraph.capture import read_capture
-from lhgraph.capture_sim import write_simulated_capture
-from lhgraph.decode import decode_capture
-from lhgraph.graph import solve_graph
-from lhgraph.simulate import load_simulation_config, simulate
-from lhgraph.solve import models_of
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.signal.capture import read_capture
+from lhgraph.signal.decode import decode_capture
+from lhgraph.sim.capture_sim import write_simulated_capture
+from lhgraph.sim.simulate import load_simulation_config, simulate
+from lhgraph.workflow.solve import models_of
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "simulation" / "realistic.toml"
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lhgraph.boards import paper_board, pyramid_board
-from lhgraph.model import ideal_angles
-from lhgraph.pnp import board_poses
-from lhgraph.transforms import se3_exp
+from lhgraph.estimation.init.pnp import board_poses
+from lhgraph.geometry.transforms import se3_exp
+from lhgraph.model.boards import paper_board, pyramid_board
+from lhgraph.model.lh1 import ideal_angles
 
 
 def _views(board, M=200, seed=0, noise=5e-5, reflections=0.0):

@@ -6,12 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
-from lhgraph.board import load_board
-from lhgraph.decode import decode_file
-from lhgraph.graph import solve_graph
-from lhgraph.libsurvive import read_libsurvive_board, read_libsurvive_poses
-from lhgraph.solve import models_of
-from lhgraph.transforms import inverse, rotation_angle
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.geometry.transforms import inverse, rotation_angle
+from lhgraph.model.board import load_board
+from lhgraph.signal.decode import decode_file
+from lhgraph.signal.libsurvive import read_libsurvive_board, read_libsurvive_poses
+from lhgraph.workflow.solve import models_of
 
 FIXTURE = Path(__file__).resolve().parent / "data" / "libsurvive" / "lh1_test_cal_hmd_7s.rec.gz"
 

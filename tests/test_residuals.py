@@ -6,15 +6,15 @@ import gtsam
 import numpy as np
 import pytest
 
-from lhgraph.model import FactoryCalibration, StationModel
-from lhgraph.residuals import (
+from lhgraph.estimation.residuals import (
     BearingHits,
     bearing_residuals,
     motion_residuals,
     right_jacobian_inverse,
     wnoa_covariance,
 )
-from lhgraph.transforms import se3_exp
+from lhgraph.geometry.transforms import se3_exp
+from lhgraph.model.lh1 import FactoryCalibration, StationModel
 
 EPS = 1e-6
 

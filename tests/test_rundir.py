@@ -12,18 +12,18 @@ import pytest
 
 from lhgraph.cli import main
 from lhgraph.errors import InputError
-from lhgraph.fileio import read_csv_columns
-from lhgraph.rundir import is_run_directory, run_to_directory
-from lhgraph.simulate import default_simulation_config, simulate, write_simulation
-from lhgraph.solve import load_solve_config
-from lhgraph.stations import load_stations
+from lhgraph.io.files import read_csv_columns
+from lhgraph.io.stations import load_stations
+from lhgraph.sim.simulate import default_simulation_config, simulate, write_simulation
+from lhgraph.workflow.rundir import is_run_directory, run_to_directory
+from lhgraph.workflow.solve import load_solve_config
 
 
 @pytest.fixture(scope="module")
 def capture_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 1.5 s simulated capture (default layout) with its raw .lhcap and truth; station 0
     flashes first, so decoded station indices equal the simulator's (docs/decoding.md)."""
-    from lhgraph.capture_sim import write_simulated_capture
+    from lhgraph.sim.capture_sim import write_simulated_capture
 
     out = tmp_path_factory.mktemp("capture")
     sim = simulate(dataclasses.replace(default_simulation_config(), duration_s=1.5,

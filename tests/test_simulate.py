@@ -8,13 +8,16 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from lhgraph.angles import load_angles
-from lhgraph.board import load_board
 from lhgraph.cli import main
 from lhgraph.errors import InputError
-from lhgraph.model import FactoryCalibration, StationModel, predict, sweep_angle
-from lhgraph.signal import LightPulses
-from lhgraph.simulate import (
+from lhgraph.geometry.transforms import inverse, transform_points
+from lhgraph.io.angles import load_angles
+from lhgraph.io.stations import load_stations
+from lhgraph.io.trajectory import load_trajectory
+from lhgraph.model.board import load_board
+from lhgraph.model.lh1 import FactoryCalibration, StationModel, predict, sweep_angle
+from lhgraph.signal.pulses import LightPulses
+from lhgraph.sim.simulate import (
     ROTOR_PERIOD_S,
     SYNC_SPACING_S,
     MotionConfig,
@@ -29,9 +32,6 @@ from lhgraph.simulate import (
     solve_hit_times,
     write_simulation,
 )
-from lhgraph.stations import load_stations
-from lhgraph.trajectory import load_trajectory
-from lhgraph.transforms import inverse, transform_points
 
 ROOT = Path(__file__).resolve().parent.parent
 SIM_CONFIGS = ROOT / "configs" / "simulation"

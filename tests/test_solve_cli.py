@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from lhgraph.cli import main
-from lhgraph.simulate import load_simulation_config, simulate, write_simulation
-from lhgraph.stations import load_stations
-from lhgraph.trajectory import load_trajectory
+from lhgraph.io.stations import load_stations
+from lhgraph.io.trajectory import load_trajectory
+from lhgraph.sim.simulate import load_simulation_config, simulate, write_simulation
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "simulation" / "default.toml"
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from lhgraph.errors import SolverError
-from lhgraph.simulate import load_simulation_config, simulate
-from lhgraph.streaming import StreamingSolver, cycles
-from lhgraph.transforms import inverse, se3_log
+from lhgraph.estimation.graph.streaming import StreamingSolver, cycles
+from lhgraph.geometry.transforms import inverse, se3_log
+from lhgraph.sim.simulate import load_simulation_config, simulate
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "simulation" / "default.toml"
 

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from lhgraph.errors import InputError
-from lhgraph.stations import Station, Stations
-from lhgraph.study import (
+from lhgraph.geometry.transforms import make_pose, so3_exp
+from lhgraph.io.stations import Station, Stations
+from lhgraph.workflow.study import (
     load_study_config,
     protocol_statistics,
     result_file,
@@ -19,7 +20,6 @@ from lhgraph.study import (
     signed_errors,
     table_iii_markdown,
 )
-from lhgraph.transforms import make_pose, so3_exp
 
 REPO = Path(__file__).resolve().parents[1]
 

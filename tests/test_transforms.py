@@ -5,7 +5,7 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from lhgraph.transforms import (
+from lhgraph.geometry.transforms import (
     euler_zyx,
     interpolate_poses,
     inverse,

@@ -8,15 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lhgraph.board import save_board
 from lhgraph.cli import main
 from lhgraph.errors import InputError
-from lhgraph.rundir import run_to_directory
-from lhgraph.simulate import default_simulation_config, simulate
-from lhgraph.solve import SolveConfig
-from lhgraph.stations import save_stations
-from lhgraph.trajectory import save_trajectory
-from lhgraph.viewer import build_scene, export, frustum_segments
+from lhgraph.io.stations import save_stations
+from lhgraph.io.trajectory import save_trajectory
+from lhgraph.model.board import save_board
+from lhgraph.report.viewer import build_scene, export, frustum_segments
+from lhgraph.sim.simulate import default_simulation_config, simulate
+from lhgraph.workflow.rundir import run_to_directory
+from lhgraph.workflow.solve import SolveConfig
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +41,7 @@ def test_frustum_geometry() -> None:
 
 
 def test_scene_contents(run_dir: Path) -> None:
-    from lhgraph.board import load_board
+    from lhgraph.model.board import load_board
 
     board = load_board(run_dir / "board.toml")
     scene = build_scene(run_dir, board, board_poses=3)
@@ -78,7 +78,7 @@ def test_export_ply_with_open3d(run_dir: Path, tmp_path: Path) -> None:
 def test_run_directory_board_found_from_summary(tmp_path: Path) -> None:
     """A run directory written by `lhgraph solve` names its board in summary.json."""
     sim = simulate(dataclasses.replace(default_simulation_config(), duration_s=1.0), seed=4)
-    from lhgraph.simulate import write_simulation
+    from lhgraph.sim.simulate import write_simulation
 
     write_simulation(sim, tmp_path / "in")
     config = SolveConfig(tmp_path / "in/board.toml", tmp_path / "in/angles.csv")

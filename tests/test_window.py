@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lhgraph.angles import Angles
 from lhgraph.errors import InputError
-from lhgraph.model import ideal_angles
-from lhgraph.transforms import make_pose, so3_exp, transform_points
-from lhgraph.window import motion_rate, motion_start, moving_window
+from lhgraph.geometry.transforms import make_pose, so3_exp, transform_points
+from lhgraph.io.angles import Angles
+from lhgraph.model.lh1 import ideal_angles
+from lhgraph.workflow.window import motion_rate, motion_start, moving_window
 
 SENSORS = np.array([[0.0, 0.0, 0.0], [0.0, 0.05, 0.0], [0.0, 0.0, 0.05], [0.0, -0.05, 0.02]])
 

@@ -1,0 +1,249 @@
+"""Streaming calibration: sync cycles are added to an incremental smoother as they arrive.
+
+The first ``warmup_s`` seconds are solved in batch
+(:func:`lhgraph.estimation.graph.solver.solve_graph`) to
+initialise; afterwards every call of :meth:`StreamingSolver.add` appends the new sweeps'
+board states, bearing factors, offset priors and motion priors to GTSAM's
+``IncrementalFixedLagSmoother`` (iSAM2 underneath) and returns the current station
+estimate. Board states older than ``lag_s`` are marginalised; the station poses never are.
+Inside iSAM2 each factor callback evaluates only its own sweep (GTSAM copies the Values for
+every Python callback, so the window, not the capture, sets the cost).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import B, L, V, X
+from numpy.typing import NDArray
+
+from lhgraph.errors import SolverError
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.problem import build_problem
+from lhgraph.estimation.residuals import (
+    BearingHits,
+    bearing_residuals,
+    motion_residuals,
+    wnoa_covariance,
+)
+from lhgraph.geometry.transforms import se3_exp
+from lhgraph.io.angles import Angles
+from lhgraph.model.board import Board
+from lhgraph.model.lh1 import StationModel
+
+Array = NDArray[np.float64]
+
+
+@dataclass
+class StreamingEstimate:
+    """Station poses ``T_world_lh`` (index -> 4x4) and covariances after an update."""
+
+    time: float
+    stations: dict[int, Array]
+    covariances: dict[int, Array]
+    update_s: float
+
+
+def _bearing_error(hits: BearingHits, k: int, slot: int, model: StationModel) -> Callable:
+    """Callback of one sweep's bearing factor, evaluating only that sweep."""
+    models = [StationModel()] * slot + [model]
+
+    def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
+        Xk = values.atPose3(X(k)).matrix()[None]
+        Vk = values.atVector(V(k))[None]
+        Ls = np.repeat(np.eye(4)[None], slot + 1, axis=0)
+        if slot > 0:
+            Ls[slot] = values.atPose3(L(slot)).matrix()
+        r, HX, HV, HL = bearing_residuals(hits, Xk, Vk, Ls, models, jacobians=H is not None)
+        r = r + values.atVector(B(k))[0]
+        if H is not None:
+            H[0], H[1], H[2] = HX, HV, np.ones((len(r), 1))
+            if slot > 0:
+                H[3] = HL
+        return r
+
+    return error
+
+
+def _motion_error(k: int, dt: float) -> Callable:
+    """Callback of the motion prior between states k and k+1."""
+    def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
+        Xs = [values.atPose3(X(j)).matrix()[None] for j in (k, k + 1)]
+        Vs = [values.atVector(V(j))[None] for j in (k, k + 1)]
+        e, He = motion_residuals(Xs[0], Vs[0], Xs[1], Vs[1], np.array([dt]),
+                                 jacobians=H is not None)
+        if H is not None:
+            for j in range(4):
+                H[j] = He[j][0]
+        return e[0]
+
+    return error
+
+
+def _isam2_params() -> gtsam.ISAM2Params:
+    """iSAM2 settings: gtsam's defaults (relinearise variables that moved more than 0.1,
+    every 10th update), except that twists and sweep offsets are relinearised only beyond
+    1.0: the motion prior is linear in the twists and the bearing factors nearly so (they
+    see a twist only through the < 0.2 ms spread of a sweep), and linear in the offsets.
+    Relinearising them with the poses cost a 50 ms spike every 10th update (mean 7.8 ms
+    against 3.7 ms, same station estimate; ``benchmarks/graph_benchmark.py``)."""
+    params = gtsam.ISAM2Params()
+    thresholds = gtsam.ISAM2ThresholdMap()
+    for symbol, threshold in (("x", [0.1] * 6), ("l", [0.1] * 6), ("v", [1.0] * 6),
+                              ("b", [1.0])):
+        thresholds.insert((symbol, np.array(threshold)[:, None]))
+    params.setRelinearizeThreshold(thresholds)
+    return params
+
+
+class StreamingSolver:
+    """Incremental calibration of the stations in ``station_ids`` (first = reference)."""
+
+    def __init__(self, board: Board, station_ids: list[int],
+                 models: dict[int, StationModel] | None = None,
+                 options: GraphOptions | None = None, lag_s: float = 0.5,
+                 warmup_s: float = 1.0):
+        self.board = board
+        self.station_ids = list(station_ids)
+        self.models = models or {}
+        self.options = options or GraphOptions()
+        self.lag_s = lag_s
+        self.warmup_s = warmup_s
+        self._pending: list[Angles] = []
+        self._smoother: gtsam.IncrementalFixedLagSmoother | None = None
+        self._k = 0  # next state index
+        self._last: tuple[float, Array, Array] | None = None  # time, pose, twist of last state
+        self._psd = (self.options.accel_psd_rot, self.options.accel_psd_pos)
+        self._sigma = self.options.angle_sigma_rad  # the warm-up solve's learned value later
+
+    def add(self, chunk: Angles) -> StreamingEstimate | None:
+        """Add the hits of one or more complete sync cycles; returns the current estimate
+        (``None`` while warming up)."""
+        tic = time.perf_counter()
+        if self._smoother is None:
+            self._pending.append(chunk)
+            data = _concat(self._pending)
+            if data.time[-1] - data.time[0] < self.warmup_s:
+                return None
+            self._start(data)
+        else:
+            self._extend(chunk)
+        return self.estimate(time.perf_counter() - tic)
+
+    def estimate(self, update_s: float = 0.0) -> StreamingEstimate:
+        """Current station poses and marginal covariances."""
+        if self._smoother is None:
+            raise SolverError("no estimate yet: still warming up")
+        values = self._smoother.calculateEstimate()
+        poses = {self.station_ids[0]: np.eye(4)}
+        covs = {self.station_ids[0]: np.zeros((6, 6))}
+        for slot, sid in enumerate(self.station_ids[1:], start=1):
+            poses[sid] = values.atPose3(L(slot)).matrix()
+            covs[sid] = self._smoother.marginalCovariance(L(slot))
+        return StreamingEstimate(self._last[0], poses, covs, update_s)
+
+    def _start(self, data: Angles) -> None:
+        options = GraphOptions(**{**self.options.__dict__, "reference": self.station_ids[0]})
+        batch = solve_graph(self.board, data, self.models, options)
+        self._psd = (batch.diagnostics.get("accel_psd_rot", self._psd[0]),
+                     batch.diagnostics.get("accel_psd_pos", self._psd[1]))
+        self._sigma = batch.diagnostics.get("angle_sigma_rad", self._sigma)
+        self._smoother = gtsam.IncrementalFixedLagSmoother(self.lag_s, _isam2_params())
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        stamps = gtsam.FixedLagSmootherKeyTimestampMap()
+        t_now = float(batch.trajectory.time[-1])
+        for slot, sid in enumerate(self.station_ids[1:], start=1):
+            T = batch.stations.pose(sid)
+            values.insert(L(slot), gtsam.Pose3(T))
+            stamps.insert((L(slot), t_now))
+            # the batch result as a prior keeps what the warm-up data said about the station
+            cov = batch.stations.stations[sid].covariance
+            graph.add(gtsam.PriorFactorPose3(L(slot), gtsam.Pose3(T),
+                                             gtsam.noiseModel.Gaussian.Covariance(cov)))
+        # the last warm-up state starts the chain, with a prior from the batch solution
+        T_last = batch.trajectory.T_world_board[-1]
+        V_last = (np.linalg.inv(batch.trajectory.T_world_board[-2]) @ T_last)
+        dt = batch.trajectory.time[-1] - batch.trajectory.time[-2]
+        xi = gtsam.Pose3.Logmap(gtsam.Pose3(V_last)) / dt
+        k = self._new_state(values, stamps, t_now, T_last, xi)
+        graph.add(gtsam.PriorFactorPose3(X(k), gtsam.Pose3(T_last),
+                                         gtsam.noiseModel.Isotropic.Sigma(6, 1e-3)))
+        graph.add(gtsam.PriorFactorVector(V(k), xi, gtsam.noiseModel.Isotropic.Sigma(6, 0.5)))
+        self._smoother.update(graph, values, stamps)
+
+    def _new_state(self, values: gtsam.Values, stamps, t: float, T: Array, xi: Array) -> int:
+        k = self._k
+        values.insert(X(k), gtsam.Pose3(T))
+        values.insert(V(k), xi)
+        values.insert(B(k), np.zeros(1))
+        for key in (X(k), V(k), B(k)):
+            stamps.insert((key, t))
+        self._k += 1
+        self._last = (t, T, xi)
+        return k
+
+    def _extend(self, chunk: Angles) -> None:
+        problem = build_problem(self.board, chunk, self.models, self.station_ids[0],
+                                self.station_ids)
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        stamps = gtsam.FixedLagSmootherKeyTimestampMap()
+        huber = {"huber": gtsam.noiseModel.mEstimator.Huber,
+                 "cauchy": gtsam.noiseModel.mEstimator.Cauchy}[self.options.loss].Create(
+            self.options.huber_k, gtsam.noiseModel.mEstimator.Base.ReweightScheme.Scalar)
+        offset_noise = gtsam.noiseModel.Isotropic.Sigma(1, self.options.sweep_offset_sigma_rad)
+        h = problem.hits
+        for j in range(problem.n_states):
+            t_prev, T_prev, xi = self._last
+            t = float(problem.state_time[j])
+            dt = t - t_prev
+            k = self._new_state(values, stamps, t, T_prev @ se3_exp(dt * xi), xi)
+            a, b = problem.bounds[j], problem.bounds[j + 1]
+            slot = int(problem.state_station[j])
+            sweep = BearingHits(np.zeros(b - a, dtype=np.int64), h.station[a:b], h.s_board[a:b],
+                                h.axis[a:b], h.dt[a:b], h.angle[a:b])
+            noise = gtsam.noiseModel.Robust.Create(
+                huber, gtsam.noiseModel.Isotropic.Sigma(int(b - a), self._sigma))
+            keys = [X(k), V(k), B(k)] + ([L(slot)] if slot > 0 else [])
+            graph.add(gtsam.CustomFactor(noise, keys, _bearing_error(
+                sweep, k, slot, problem.models[slot])))
+            graph.add(gtsam.PriorFactorVector(B(k), np.zeros(1), offset_noise))
+            Q = wnoa_covariance(np.array([dt]), *self._psd)[0]
+            graph.add(gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(Q),
+                                         [X(k - 1), V(k - 1), X(k), V(k)],
+                                         _motion_error(k - 1, dt)))
+        t_now = self._last[0]
+        for slot in range(1, len(self.station_ids)):
+            stamps.insert((L(slot), t_now))
+        self._smoother.update(graph, values, stamps)
+        current = self._smoother.calculateEstimate()
+        self._last = (t_now, current.atPose3(X(self._k - 1)).matrix(),
+                      current.atVector(V(self._k - 1)))
+
+
+def _concat(chunks: list[Angles]) -> Angles:
+    """One Angles table from consecutive chunks."""
+    cols = ("time", "lighthouse", "axis", "sensor", "angle")
+    parts = {c: np.concatenate([getattr(a, c) for a in chunks]) for c in cols}
+    extra = {k: np.concatenate([a.extra[k] for a in chunks]) for k in chunks[0].extra}
+    return Angles(**parts, extra=extra)
+
+
+def cycles(angles: Angles, cycle_s: float = 4 / 120.0) -> Iterator[Angles]:
+    """Split a capture into consecutive chunks of whole sweeps, about ``cycle_s`` long (one
+    LH1 sync cycle of 4 slots by default), as they would arrive live."""
+    sweep = angles.sweep_ids()
+    first = np.r_[0, np.flatnonzero(np.diff(sweep)) + 1]
+    start_time = angles.time[first]
+    edges = np.searchsorted(start_time, np.arange(start_time[0], start_time[-1] + cycle_s,
+                                                  cycle_s), side="left")
+    bounds = np.r_[first[np.unique(edges[edges < len(first)])], len(sweep)]
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        if b > a:
+            yield angles.select(np.arange(a, b))

@@ -1,0 +1,72 @@
+"""The measurements arranged as a graph problem: one board state per sweep, hits sorted by state."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.estimation.residuals import (
+    BearingHits,
+)
+from lhgraph.io.angles import Angles
+from lhgraph.model.board import Board
+from lhgraph.model.lh1 import StationModel
+
+Array = NDArray[np.float64]
+Progress = Callable[[str], None]
+
+
+@dataclass
+class GraphProblem:
+    """The measurements arranged as a graph: one state per sweep, hits sorted by state."""
+
+    station_ids: list[int]            # station slot -> station index; slot 0 = reference
+    models: list[StationModel]
+    state_time: Array                 # (K,) s
+    state_station: NDArray[np.int64]  # (K,) station slot of each sweep
+    hits: BearingHits
+    hit_rows: NDArray[np.int64]       # (N,) row of each sorted hit in the input table
+    bounds: NDArray[np.int64]         # (K + 1,) hit slice of state k = bounds[k]:bounds[k+1]
+
+    @property
+    def n_states(self) -> int:
+        return len(self.state_time)
+
+
+def build_problem(board: Board, angles: Angles, models: dict[int, StationModel],
+                  reference: int, station_ids: list[int] | None = None) -> GraphProblem:
+    """Group hits into sweeps (one board state each) and order everything for the graph.
+
+    ``station_ids`` fixes the station slots (slot 0 = reference); by default the stations
+    present in ``angles``."""
+    if station_ids is None:
+        station_ids = [reference] + [s for s in angles.stations() if s != reference]
+    slot_of = {s: i for i, s in enumerate(station_ids)}
+    sensor_rows = angles.check_board(board)
+    sweep = angles.sweep_ids()
+    n_sweeps = int(sweep.max()) + 1
+    counts = np.bincount(sweep, minlength=n_sweeps)
+    mean_time = np.bincount(sweep, weights=angles.time, minlength=n_sweeps) / counts
+    order_states = np.argsort(mean_time, kind="stable")
+    state_of_sweep = np.empty(n_sweeps, dtype=np.int64)
+    state_of_sweep[order_states] = np.arange(n_sweeps)
+    state = state_of_sweep[sweep]
+    rows = np.lexsort((angles.time, state))
+    state = state[rows]
+    station_slot = np.array([slot_of[s] for s in angles.lighthouse[rows].tolist()], dtype=np.int64)
+    state_time = mean_time[order_states]
+    hits = BearingHits(
+        state=state,
+        station=station_slot,
+        s_board=board.positions[sensor_rows[rows]],
+        axis=angles.axis[rows],
+        dt=angles.time[rows] - state_time[state],
+        angle=angles.angle[rows],
+    )
+    bounds = np.searchsorted(state, np.arange(n_sweeps + 1))
+    state_station = station_slot[bounds[:-1]]
+    return GraphProblem(station_ids, [models.get(s, StationModel()) for s in station_ids],
+                        state_time, state_station, hits, rows, bounds)

@@ -1,0 +1,56 @@
+"""What a solver returns: the result dataclass shared by every method."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.io.stations import Stations
+from lhgraph.io.trajectory import Trajectory
+
+
+@dataclass
+class Residuals:
+    """Per-hit residuals of the final solution (one row per hit used).
+
+    ``residual_rad`` = measured - predicted angle; ``weight`` is the robust weight in [0, 1].
+    """
+
+    time: NDArray[np.float64]
+    lighthouse: NDArray[np.int64]
+    axis: NDArray[np.int64]
+    sensor: NDArray[np.int64]
+    residual_rad: NDArray[np.float64]
+    weight: NDArray[np.float64]
+
+    def rms_urad(self, inliers_only: bool = True) -> float:
+        """Root-mean-square residual (microradians), of inliers (weight > 0.5) by default."""
+        r = self.residual_rad[self.weight > 0.5] if inliers_only else self.residual_rad
+        return float(np.sqrt(np.mean(r**2)) * 1e6) if len(r) else float("nan")
+
+    def inlier_fraction(self) -> float:
+        """Fraction of hits with robust weight > 0.5."""
+        return float(np.mean(self.weight > 0.5)) if len(self.weight) else float("nan")
+
+
+@dataclass
+class SolveResult:
+    """Outcome of a calibration: station poses (world = reference station unless set
+    otherwise), the board path, status and diagnostics. ``timings_s`` maps stage -> seconds."""
+
+    method: str
+    stations: Stations
+    trajectory: Trajectory | None
+    residuals: Residuals | None
+    status: str = "converged"
+    iterations: int = 0
+    final_error: float = float("nan")
+    timings_s: dict[str, float] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    diagnostics: dict[str, float] = field(default_factory=dict)
+    """Method-specific figures, e.g. the graph's adapted motion-prior PSDs."""
+    error_history: list[float] = field(default_factory=list)
+    """Graph error (0.5 * sum of whitened squared residuals) at the initial values and after
+    each optimiser iteration; empty for methods without such a loop."""

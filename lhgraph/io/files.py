@@ -1,0 +1,215 @@
+"""Shared readers for the contract's TOML and CSV files, with one-line validation errors.
+
+Every problem raises :class:`~lhgraph.errors.InputError` naming the file and the key or row.
+Writers never overwrite an existing file unless asked.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import tomllib
+import warnings
+from collections.abc import Iterable, Iterator, Sequence
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+import tomli_w
+from numpy.typing import NDArray
+
+from lhgraph.errors import InputError
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """Parse a TOML file; missing or malformed files raise InputError."""
+    path = Path(path)
+    try:
+        with path.open("rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise InputError("file not found", path) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a TOML file", path) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"not valid TOML ({exc})", path) from None
+    except UnicodeDecodeError:
+        raise InputError("not a text file", path) from None
+
+
+def check_writable(path: str | Path, overwrite: bool) -> Path:
+    """Refuse to replace an existing file unless ``overwrite``; create parent directories."""
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise InputError("exists already (use --force to overwrite)", path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def write_atomic(path: str | Path, data: bytes, overwrite: bool = False) -> Path:
+    """Write bytes through a temporary file and rename, so no half file ever appears."""
+    path = check_writable(path, overwrite)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+    return path
+
+
+def write_toml(path: str | Path, data: dict[str, Any], overwrite: bool = False) -> Path:
+    """Write a TOML file atomically."""
+    return write_atomic(path, tomli_w.dumps(data).encode(), overwrite)
+
+
+def get_key(table: dict[str, Any], key: str, source: str | Path, where: str) -> Any:
+    """``table[key]`` or InputError 'missing key'."""
+    if key not in table:
+        raise InputError(f"missing key '{key}'", source, where)
+    return table[key]
+
+
+def as_int(value: Any, source: str | Path, where: str) -> int:
+    """An integer value (bools are refused)."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise InputError(f"expected an integer, got {value!r}", source, where)
+    return value
+
+
+def as_float(value: Any, source: str | Path, where: str) -> float:
+    """A finite number."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise InputError(f"expected a finite number, got {value!r}", source, where)
+    return float(value)
+
+
+def as_vector(value: Any, n: int, source: str | Path, where: str) -> NDArray[np.float64]:
+    """A list of ``n`` finite numbers."""
+    if not isinstance(value, list) or len(value) != n:
+        raise InputError(f"expected a list of {n} numbers, got {value!r}", source, where)
+    return np.array([as_float(v, source, where) for v in value])
+
+
+def as_matrix(value: Any, rows: int, cols: int, source: str | Path, where: str) -> NDArray:
+    """A list of ``rows`` lists of ``cols`` finite numbers."""
+    if not isinstance(value, list) or len(value) != rows:
+        raise InputError(f"expected a {rows}x{cols} matrix", source, where)
+    return np.stack([as_vector(row, cols, source, where) for row in value])
+
+
+def station_tables(
+    data: dict[str, Any], source: str | Path
+) -> Iterator[tuple[int, dict[str, Any], str]]:
+    """``(index, table, where)`` of every ``[lighthouses.<index>]`` table of a TOML document."""
+    tables = data.get("lighthouses")
+    if not isinstance(tables, dict) or not tables:
+        raise InputError("expected [lighthouses.<index>] tables", source)
+    for name, table in tables.items():
+        where = f"lighthouses.{name}"
+        try:
+            index = int(name)
+        except ValueError:
+            raise InputError("station index must be an integer", source, where) from None
+        if not isinstance(table, dict):
+            raise InputError("expected a table", source, where)
+        yield index, table, where
+
+
+def _numeric_table(f: TextIO, n_columns: int) -> NDArray | None:
+    """The rest of an open CSV as a float array when every field is a finite number and every
+    row has ``n_columns`` fields (numpy's C parser); ``None`` means: validate row by row."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "input contained no data": handled below
+            data = np.loadtxt(f, delimiter=",", ndmin=2, dtype=np.float64)
+    except (ValueError, UnicodeDecodeError):
+        return None
+    if data.size == 0:
+        return None
+    if data.shape[1] != n_columns or not np.all(np.isfinite(data)):
+        return None
+    return data
+
+
+def read_csv_columns(
+    path: str | Path, columns: Sequence[tuple[str, type]], optional: Iterable[str] = ()
+) -> dict[str, NDArray]:
+    """Read a CSV with a header into typed numpy columns.
+
+    ``columns`` lists the required (name, int|float) pairs; any other columns are read as
+    float when they parse as numbers (extra columns are allowed by the contract). Errors
+    name the file, the line number and the column.
+    """
+    path = Path(path)
+    try:
+        f = path.open(newline="")
+    except FileNotFoundError:
+        raise InputError("file not found", path) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a CSV file", path) from None
+    with f:
+        reader = csv.reader(f)
+        try:
+            header = [h.strip() for h in next(reader)]
+        except StopIteration:
+            raise InputError("empty file, expected a header line", path) from None
+        except UnicodeDecodeError:
+            raise InputError("not a text file", path) from None
+        missing = [name for name, _ in columns if name not in header]
+        if missing:
+            raise InputError(
+                f"missing column(s) {', '.join(missing)} (header: {','.join(header)})", path, "1"
+            )
+        fast = _numeric_table(f, len(header))
+        if fast is None:
+            f.seek(0)
+            next(reader)
+            try:
+                rows = list(reader)
+            except (csv.Error, UnicodeDecodeError) as exc:
+                raise InputError(f"unreadable CSV ({exc})", path) from None
+    types = dict(columns)
+    if fast is not None:
+        wanted = [(j, name) for j, name in enumerate(header) if name in types or name in optional]
+        if all(types.get(name, float) is float or np.array_equal(fast[:, j], np.round(fast[:, j]))
+               for j, name in wanted):
+            return {name: fast[:, j].astype(np.int64) if types.get(name, float) is int
+                    else fast[:, j] for j, name in wanted}
+        f = path.open(newline="")
+        with f:
+            rows = list(csv.reader(f))[1:]
+    out: dict[str, NDArray] = {}
+    for j, name in enumerate(header):
+        if name not in types and name not in optional:
+            continue
+        kind = types.get(name, float)
+        values = np.empty(len(rows), dtype=np.int64 if kind is int else np.float64)
+        for i, row in enumerate(rows):
+            line = str(i + 2)
+            if len(row) != len(header):
+                raise InputError(f"expected {len(header)} fields, got {len(row)}", path, line)
+            text = row[j].strip()
+            try:
+                value = int(text) if kind is int else float(text)
+            except ValueError:
+                kind_name = "an integer" if kind is int else "a number"
+                raise InputError(f"column '{name}': expected {kind_name}, got {text!r}", path,
+                                 line) from None
+            if kind is float and not math.isfinite(value):
+                raise InputError(f"column '{name}': value is {text}", path, line)
+            values[i] = value
+        out[name] = values
+    return out
+
+
+def write_csv_columns(
+    path: str | Path, columns: dict[str, NDArray], formats: dict[str, str], overwrite: bool
+) -> Path:
+    """Write named columns as CSV (header in dict order) atomically."""
+    names = list(columns)
+    n = len(next(iter(columns.values()))) if columns else 0
+    lines = [",".join(names)]
+    cols = [columns[k] for k in names]
+    fmts = [formats.get(k, "{:.17g}") for k in names]
+    for i in range(n):
+        lines.append(",".join(fmt.format(col[i]) for fmt, col in zip(fmts, cols, strict=True)))
+    return write_atomic(path, ("\n".join(lines) + "\n").encode(), overwrite)

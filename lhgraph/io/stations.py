@@ -1,0 +1,122 @@
+"""Station poses and their files (truth and results share one format, SPEC §4).
+
+``[lighthouses.<index>]`` tables hold ``position`` and ``quaternion = [w, x, y, z]`` of
+``T_world_lh``; results add ``covariance`` (6x6, tangent order ``[rx, ry, rz, tx, ty, tz]``)
+and may add the factory-calibration keys and ``rotor_offsets``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.errors import InputError
+from lhgraph.geometry.transforms import matrix_to_quat, pose_from_quat
+from lhgraph.io.files import (
+    as_int,
+    as_matrix,
+    as_vector,
+    get_key,
+    read_toml,
+    station_tables,
+    write_toml,
+)
+from lhgraph.model.lh1 import CALIBRATION_KEYS, FactoryCalibration, StationModel
+
+
+@dataclass
+class Station:
+    """One station: ``T_world_lh`` (4x4), optional covariance (6x6) and model."""
+
+    T_world_lh: NDArray[np.float64]
+    covariance: NDArray[np.float64] | None = None
+    model: StationModel = field(default_factory=StationModel)
+
+
+@dataclass
+class Stations:
+    """All stations of a setup, keyed by station index; ``reference`` defines the world."""
+
+    reference: int
+    stations: dict[int, Station]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def pose(self, index: int) -> NDArray[np.float64]:
+        """``T_world_lh`` of station ``index``."""
+        return self.stations[index].T_world_lh
+
+    def indices(self) -> list[int]:
+        """Sorted station indices."""
+        return sorted(self.stations)
+
+    def relative_to_reference(self) -> Stations:
+        """The same setup re-expressed with the reference station's frame as world."""
+        T_ref_world = np.linalg.inv(self.pose(self.reference))
+        return Stations(
+            self.reference,
+            {k: Station(T_ref_world @ s.T_world_lh, s.covariance, s.model)
+             for k, s in self.stations.items()},
+            dict(self.extra),
+        )
+
+
+def _parse_model(table: dict[str, Any], path: str | Path, where: str) -> StationModel:
+    values = {}
+    for key in CALIBRATION_KEYS:
+        if key in table:
+            values[key] = as_vector(table[key], 2, path, f"{where}.{key}")
+    offsets = np.zeros((2, 3))
+    if "rotor_offsets" in table:
+        offsets = as_matrix(table["rotor_offsets"], 2, 3, path, f"{where}.rotor_offsets")
+    return StationModel(FactoryCalibration(**values), offsets)
+
+
+def load_stations(path: str | Path) -> Stations:
+    """Read a stations TOML (truth or result)."""
+    data = read_toml(path)
+    reference = as_int(get_key(data, "reference", path, "top level"), path, "reference")
+    stations: dict[int, Station] = {}
+    for index, table, where in station_tables(data, path):
+        position = as_vector(get_key(table, "position", path, where), 3, path, where + ".position")
+        q = as_vector(get_key(table, "quaternion", path, where), 4, path, where + ".quaternion")
+        norm = np.linalg.norm(q)
+        if not 0.9 < norm < 1.1:
+            raise InputError(f"quaternion norm {norm:.3g} is not ~1", path, where + ".quaternion")
+        cov = None
+        if "covariance" in table:
+            cov = as_matrix(table["covariance"], 6, 6, path, where + ".covariance")
+        stations[index] = Station(pose_from_quat(position, q / norm), cov,
+                                  _parse_model(table, path, where))
+    if reference not in stations:
+        raise InputError(f"reference station {reference} has no [lighthouses.{reference}] table",
+                         path, "reference")
+    extra = {k: v for k, v in data.items() if k not in ("reference", "lighthouses")}
+    return Stations(reference, stations, extra)
+
+
+def stations_to_toml(stations: Stations, with_model: bool = True) -> dict[str, Any]:
+    """The TOML document of ``stations`` (contract keys first)."""
+    tables: dict[str, Any] = {}
+    for index in stations.indices():
+        s = stations.stations[index]
+        table: dict[str, Any] = {
+            "position": [float(x) for x in s.T_world_lh[:3, 3]],
+            "quaternion": [float(x) for x in matrix_to_quat(s.T_world_lh[:3, :3])],
+        }
+        if s.covariance is not None:
+            table["covariance"] = [[float(x) for x in row] for row in s.covariance]
+        if with_model and not s.model.calibration.is_zero():
+            table.update(s.model.calibration.as_dict())
+        if with_model and np.any(s.model.rotor_offsets):
+            table["rotor_offsets"] = [[float(x) for x in row] for row in s.model.rotor_offsets]
+        tables[str(index)] = table
+    return {**stations.extra, "reference": int(stations.reference), "lighthouses": tables}
+
+
+def save_stations(stations: Stations, path: str | Path, overwrite: bool = False) -> Path:
+    """Write a stations TOML."""
+    return write_toml(path, stations_to_toml(stations), overwrite)

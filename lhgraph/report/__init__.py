@@ -1,0 +1,1 @@
+"""lhgraph.report.text."""

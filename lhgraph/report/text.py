@@ -1,0 +1,55 @@
+"""Human-facing summaries of a solve (mm and degrees only here)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lhgraph.estimation.result import SolveResult
+from lhgraph.geometry.transforms import euler_zyx
+from lhgraph.workflow.metrics import PoseError
+
+
+def format_solution(result: SolveResult, errors: list[PoseError] | None = None) -> str:
+    """A plain-text table of the stations, residuals, timings and (optional) errors."""
+    lines = [f"method {result.method}: {result.status} after {result.iterations} iterations"]
+    if result.stations.extra.get("world") == "gravity":
+        spread = result.diagnostics.get("gravity_spread_deg", float("nan"))
+        lines.append(f"world: gravity-aligned (z up from the stations' accelerometers, which "
+                     f"agree within {spread:.2f} deg), origin at the reference station")
+    lines.append(f"{'station':>7} {'x mm':>9} {'y mm':>9} {'z mm':>9} {'roll':>8} {'pitch':>8} "
+                 f"{'yaw deg':>8} {'sigma mm':>9} {'sigma deg':>9}")
+    for k in result.stations.indices():
+        s = result.stations.stations[k]
+        p = s.T_world_lh[:3, 3] * 1e3
+        e = np.degrees(euler_zyx(s.T_world_lh[:3, :3]))
+        if s.covariance is not None and np.any(s.covariance):
+            sp = np.sqrt(np.trace(s.covariance[3:, 3:])) * 1e3
+            sr = np.degrees(np.sqrt(np.trace(s.covariance[:3, :3])))
+            sig = f"{sp:9.3f} {sr:9.4f}"
+        else:
+            sig = f"{'-':>9} {'-':>9}"
+        ref = " (reference)" if k == result.stations.reference else ""
+        lines.append(f"{k:>7} {p[0]:9.1f} {p[1]:9.1f} {p[2]:9.1f} {e[0]:8.3f} {e[1]:8.3f} "
+                     f"{e[2]:8.3f} {sig}{ref}")
+    if result.residuals is not None:
+        r = result.residuals
+        lines.append(f"residuals: {len(r.residual_rad)} hits, rms {r.rms_urad():.1f} urad "
+                     f"(inliers), inlier fraction {r.inlier_fraction():.3f}")
+    if result.timings_s:
+        lines.append("time: " + ", ".join(f"{k} {v:.3f} s" for k, v in result.timings_s.items()))
+    for w in result.warnings:
+        lines.append(f"warning: {w}")
+    if errors:
+        lines.append(f"{'error':>7} {'X mm':>9} {'Y mm':>9} {'Z mm':>9} {'alpha':>8} {'beta':>8} "
+                     f"{'gamma':>8} {'|p| mm':>9} {'angle deg':>9}")
+        for e in errors:
+            row = e.row_mm_deg()
+            lines.append(f"{e.station:>7} " + " ".join(f"{v:9.3f}" for v in row[:3]) + " "
+                         + " ".join(f"{v:8.4f}" for v in row[3:6])
+                         + f" {row[6]:9.3f} {row[7]:9.4f}")
+    return "\n".join(lines)
+
+
+def print_solution(result: SolveResult, errors: list[PoseError] | None = None) -> None:
+    """Print :func:`format_solution` to stdout."""
+    print(format_solution(result, errors))

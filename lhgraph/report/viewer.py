@@ -1,0 +1,215 @@
+"""3-D view of a run directory: stations with their sweep frusta, board path, diodes.
+
+:func:`build_scene` turns a run directory (``stations.toml``, ``trajectory.csv``; the board
+from the run's ``summary.json`` inputs) into plain numpy primitives in the world frame
+(reference station, m). :func:`show` opens them in an Open3D window; :func:`export` writes
+a mesh (``.ply``, ``.glb``, ``.obj`` via Open3D, headless) or a PNG (Open3D's offscreen
+renderer when it works, else matplotlib). Open3D is imported only inside these functions
+(importing it takes seconds).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.errors import InputError
+from lhgraph.geometry.transforms import transform_points
+from lhgraph.io.stations import load_stations
+from lhgraph.io.trajectory import load_trajectory
+from lhgraph.model.board import Board, load_board
+
+FRUSTUM_DEPTH_M = 1.0
+FRUSTUM_HALF_ANGLE_DEG = 60.0  # the stations' sweep field of view per axis
+AXIS_LENGTH_M = 0.3
+BOARD_POSES = 5
+MESH_FORMATS = (".ply", ".glb", ".gltf", ".obj")
+
+
+@dataclass
+class Scene:
+    """Line segments (N, 2, 3) with RGB colours (N, 3) and points (M, 3) with colours,
+    world frame (m)."""
+
+    segments: NDArray[np.float64] = field(default_factory=lambda: np.empty((0, 2, 3)))
+    segment_colours: NDArray[np.float64] = field(default_factory=lambda: np.empty((0, 3)))
+    points: NDArray[np.float64] = field(default_factory=lambda: np.empty((0, 3)))
+    point_colours: NDArray[np.float64] = field(default_factory=lambda: np.empty((0, 3)))
+
+    def add_segments(self, seg: NDArray, colour: tuple[float, float, float]) -> None:
+        """Append segments of one colour."""
+        seg = np.asarray(seg, dtype=float).reshape(-1, 2, 3)
+        self.segments = np.concatenate([self.segments, seg])
+        self.segment_colours = np.concatenate([self.segment_colours,
+                                               np.tile(colour, (len(seg), 1))])
+
+    def add_points(self, pts: NDArray, colour: tuple[float, float, float]) -> None:
+        """Append points of one colour."""
+        pts = np.asarray(pts, dtype=float).reshape(-1, 3)
+        self.points = np.concatenate([self.points, pts])
+        self.point_colours = np.concatenate([self.point_colours, np.tile(colour, (len(pts), 1))])
+
+
+def frustum_segments(T_world_lh: NDArray, depth_m: float = FRUSTUM_DEPTH_M,
+                     half_angle_deg: float = FRUSTUM_HALF_ANGLE_DEG) -> NDArray[np.float64]:
+    """The 8 edges (8, 2, 3) of a station's sweep frustum: apex at the station, far
+    rectangle at ``depth_m`` along +x spanning +-``half_angle_deg`` in azimuth and elevation."""
+    t = depth_m * np.tan(np.radians(half_angle_deg))
+    corners = np.array([[depth_m, s * t, u * t] for s, u in ((1, 1), (-1, 1), (-1, -1), (1, -1))])
+    c = transform_points(T_world_lh, corners)
+    o = T_world_lh[:3, 3]
+    return np.array([[o, c[i]] for i in range(4)] + [[c[i], c[(i + 1) % 4]] for i in range(4)])
+
+
+def _run_board(run_dir: Path) -> Board | None:
+    summary = run_dir / "summary.json"
+    if not summary.is_file():
+        return None
+    board = json.loads(summary.read_text()).get("inputs", {}).get("board")
+    return load_board(board["path"]) if board and Path(board["path"]).is_file() else None
+
+
+def build_scene(run_dir: str | Path, board: Board | None = None,
+                board_poses: int = BOARD_POSES) -> Scene:
+    """Scene of a run directory (a single-method one, or a method subdirectory): station
+    axes (x red, y green, z blue) and sweep frusta (grey), the board path (orange) and the
+    board's diodes at ``board_poses`` poses along it (blue)."""
+    run_dir = Path(run_dir)
+    stations_file = run_dir / "stations.toml"
+    if not stations_file.is_file():
+        subdirs = sorted(p.name for p in run_dir.iterdir() if (p / "stations.toml").is_file()) \
+            if run_dir.is_dir() else []
+        hint = f" (methods here: {', '.join(subdirs)}; give one of them)" if subdirs else ""
+        raise InputError(f"no stations.toml: not a run directory{hint}", run_dir)
+    stations = load_stations(stations_file).relative_to_reference()
+    scene = Scene()
+    for k in stations.indices():
+        T = stations.pose(k)
+        for i, colour in enumerate(((1, 0, 0), (0, 0.7, 0), (0, 0, 1))):
+            scene.add_segments([T[:3, 3], T[:3, 3] + AXIS_LENGTH_M * T[:3, i]], colour)
+        scene.add_segments(frustum_segments(T), (0.6, 0.6, 0.6))
+    traj_file = run_dir / "trajectory.csv"
+    if traj_file.is_file():
+        traj = load_trajectory(traj_file)
+        p = traj.T_world_board[:, :3, 3]
+        scene.add_segments(np.stack([p[:-1], p[1:]], axis=1), (1.0, 0.5, 0.0))
+        board = board or _run_board(run_dir)
+        if board is not None and board_poses > 0:
+            for i in np.linspace(0, len(traj.time) - 1, board_poses).round().astype(int):
+                scene.add_points(transform_points(traj.T_world_board[i], board.positions),
+                                 (0.1, 0.3, 0.9))
+    return scene
+
+
+def to_open3d(scene: Scene, point_radius_m: float = 0.01, line_radius_m: float = 0.004):
+    """A single Open3D ``TriangleMesh``: a thin cylinder per segment, a sphere per point."""
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh()
+    for (a, b), colour in zip(scene.segments, scene.segment_colours, strict=True):
+        d = b - a
+        length = float(np.linalg.norm(d))
+        if length < 1e-9:
+            continue
+        cyl = o3d.geometry.TriangleMesh.create_cylinder(line_radius_m, length, resolution=6,
+                                                        split=1)
+        z = d / length
+        x = np.cross(z, [0, 0, 1] if abs(z[2]) < 0.9 else [1, 0, 0])
+        x /= np.linalg.norm(x)
+        T = np.eye(4)
+        T[:3, :3] = np.c_[x, np.cross(z, x), z]
+        T[:3, 3] = (a + b) / 2
+        cyl.transform(T)
+        cyl.paint_uniform_color(colour)
+        mesh += cyl
+    for p, colour in zip(scene.points, scene.point_colours, strict=True):
+        s = o3d.geometry.TriangleMesh.create_sphere(point_radius_m, resolution=4)
+        s.translate(p)
+        s.paint_uniform_color(colour)
+        mesh += s
+    mesh.compute_vertex_normals()
+    return mesh
+
+
+def show(scene: Scene) -> None:
+    """Open an interactive Open3D window (needs a display)."""
+    import open3d as o3d
+
+    o3d.visualization.draw_geometries([to_open3d(scene)], window_name="lhgraph view")
+
+
+def _png_open3d(scene: Scene, path: Path, size: tuple[int, int]) -> bool:
+    """Render with Open3D's offscreen renderer; False when it cannot run here (no GPU/EGL)."""
+    import open3d as o3d
+
+    try:
+        renderer = o3d.visualization.rendering.OffscreenRenderer(*size)
+    except RuntimeError:
+        return False
+    material = o3d.visualization.rendering.MaterialRecord()
+    material.shader = "defaultLit"
+    renderer.scene.add_geometry("scene", to_open3d(scene), material)
+    lo, hi = _bounds(scene)
+    centre = (lo + hi) / 2
+    renderer.setup_camera(60.0, centre, centre + np.array([-1.0, -1.5, 1.0]) * np.max(hi - lo),
+                          [0, 0, 1])
+    o3d.io.write_image(str(path), renderer.render_to_image())
+    return True
+
+
+def _bounds(scene: Scene) -> tuple[NDArray, NDArray]:
+    pts = np.concatenate([scene.segments.reshape(-1, 3), scene.points])
+    return pts.min(axis=0), pts.max(axis=0)
+
+
+def png_matplotlib(scene: Scene, path: str | Path) -> Path:
+    """Render the scene's segments and points with matplotlib (no display, no GPU)."""
+    from matplotlib.figure import Figure
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    fig = Figure(figsize=(8, 6))
+    ax = fig.add_subplot(projection="3d")
+    ax.add_collection3d(Line3DCollection(scene.segments, colors=scene.segment_colours, lw=1))
+    if len(scene.points):
+        ax.scatter(*scene.points.T, c=scene.point_colours, s=3)
+    lo, hi = _bounds(scene)
+    centre, half = (lo + hi) / 2, np.max(hi - lo) / 2
+    ax.set_xlim(centre[0] - half, centre[0] + half)
+    ax.set_ylim(centre[1] - half, centre[1] + half)
+    ax.set_zlim(centre[2] - half, centre[2] + half)
+    ax.set_box_aspect((1, 1, 1))
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m)")
+    fig.savefig(path, dpi=100, bbox_inches="tight")
+    return Path(path)
+
+
+def export(scene: Scene, path: str | Path, overwrite: bool = False,
+           renderer: str = "auto") -> tuple[Path, str]:
+    """Write the scene without a display: a mesh (``.ply``/``.glb``/``.gltf``/``.obj``) or
+    a ``.png``. ``renderer`` for PNGs: ``"open3d"``, ``"matplotlib"`` or ``"auto"`` (Open3D's
+    offscreen renderer, falling back to matplotlib). Returns the path and what wrote it."""
+    from lhgraph.io.files import check_writable
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (*MESH_FORMATS, ".png"):
+        raise InputError(f"unknown export format '{suffix}' (expected .png or "
+                         f"{', '.join(MESH_FORMATS)})", path)
+    check_writable(path, overwrite)
+    if suffix == ".png":
+        if renderer in ("auto", "open3d") and _png_open3d(scene, path, (1024, 768)):
+            return path, "open3d"
+        if renderer == "open3d":
+            raise InputError("Open3D's offscreen renderer cannot run here (no EGL/GPU)", path)
+        return png_matplotlib(scene, path), "matplotlib"
+    import open3d as o3d
+
+    if not o3d.io.write_triangle_mesh(str(path), to_open3d(scene)):
+        raise InputError("Open3D could not write the mesh", path)
+    return path, "open3d"

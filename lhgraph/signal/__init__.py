@@ -1,0 +1,1 @@
+"""lhgraph.signal.pulses."""

@@ -1,0 +1,320 @@
+"""Run directories: a configured solve written as one folder with results, summary and report.
+
+``lhgraph solve CONFIG.toml --output DIR`` (docs/workflow.md) writes, per method::
+
+    stations.toml    contract stations file with the 6x6 covariance (graph method)
+    trajectory.csv   board path T_world_board (world = reference station)
+    residuals.csv    one row per hit: time, lighthouse, axis, sensor, residual_rad, weight
+    summary.json     errors vs truth, residual statistics, timings, versions, input hashes
+    report.html      self-contained report (figures as base64 PNG)
+
+With several methods (config key ``methods``) each gets a subdirectory ``DIR/<method>/``
+and ``DIR`` holds a comparison ``summary.json`` and ``report.html``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import platform
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lhgraph.errors import InputError
+from lhgraph.estimation.result import Residuals, SolveResult
+from lhgraph.geometry.transforms import matrix_to_quat
+from lhgraph.io.files import check_writable, write_atomic, write_csv_columns
+from lhgraph.io.stations import Stations, load_stations, save_stations
+from lhgraph.io.trajectory import save_trajectory
+from lhgraph.workflow.metrics import PoseError, station_errors
+from lhgraph.workflow.solve import SolveConfig, SolveInputs, load_inputs, solve
+
+RUN_FILES = ("stations.toml", "trajectory.csv", "residuals.csv", "summary.json", "report.html")
+COMPARISON_FILES = ("summary.json", "report.html")
+
+
+def is_run_directory(output: str | Path) -> bool:
+    """An output is a run directory when it is an existing directory or its name does not
+    end in ``.toml`` (otherwise it is a stations TOML file)."""
+    output = Path(output)
+    return output.is_dir() or output.suffix.lower() != ".toml"
+
+
+@dataclass
+class MethodRun:
+    """One method's solve and what was written for it."""
+
+    method: str
+    result: SolveResult
+    errors: list[PoseError] | None
+    summary: dict[str, Any]
+    directory: Path
+
+
+@dataclass
+class RunDirectory:
+    """A finished run directory: the runs, the top-level report and every file written."""
+
+    directory: Path
+    runs: list[MethodRun]
+    report: Path
+    files: list[Path] = field(default_factory=list)
+
+
+def sha256_of(path: str | Path) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    import hashlib  # here, not at the top: `lhgraph solve` to a stations file never needs it
+
+    digest = hashlib.sha256()
+    with Path(path).open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def versions() -> dict[str, str]:
+    """Versions of lhgraph, gtsam, numpy and Python."""
+    import importlib.metadata  # here, not at the top: 15 ms of start-up for every solve
+
+    out = {}
+    for name in ("lhgraph", "gtsam", "numpy"):
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            out[name] = "unknown"
+    out["python"] = platform.python_version()
+    return out
+
+
+def input_files(config: SolveConfig) -> dict[str, Path]:
+    """The input files a config names (config, board, angles or capture, calibration, truth)."""
+    named = {"config": config.path, "board": config.board, "angles": config.angles,
+             "capture": config.capture, "calibration": config.calibration,
+             "truth": config.truth}
+    return {k: Path(v) for k, v in named.items() if v is not None}
+
+
+def residual_statistics(res: Residuals) -> dict[str, Any]:
+    """Counts, inlier rms and median |residual| (urad), overall and per station/axis."""
+
+    def stats(mask: np.ndarray) -> dict[str, Any]:
+        r, w = res.residual_rad[mask], res.weight[mask]
+        inl = r[w > 0.5]
+        return {"hits": int(mask.sum()),
+                "inlier_fraction": float(np.mean(w > 0.5)) if len(w) else None,
+                "rms_urad": float(np.sqrt(np.mean(inl**2)) * 1e6) if len(inl) else None,
+                "median_abs_urad": float(np.median(np.abs(r)) * 1e6) if len(r) else None,
+                "max_abs_urad": float(np.max(np.abs(r)) * 1e6) if len(r) else None}
+
+    out = stats(np.ones(len(res.residual_rad), dtype=bool))
+    out["per_station_axis"] = {
+        f"{lh}/{ax}": stats((res.lighthouse == lh) & (res.axis == ax))
+        for lh in np.unique(res.lighthouse) for ax in (0, 1)
+        if np.any((res.lighthouse == lh) & (res.axis == ax))}
+    return out
+
+
+def station_summary(stations: Stations) -> dict[str, Any]:
+    """Pose (m, quaternion wxyz) and 1-sigma (mm, deg) of every station."""
+    out = {}
+    for k in stations.indices():
+        s = stations.stations[k]
+        entry: dict[str, Any] = {"position_m": s.T_world_lh[:3, 3].tolist(),
+                                 "quaternion_wxyz": matrix_to_quat(s.T_world_lh[:3, :3]).tolist()}
+        if s.covariance is not None:
+            entry["sigma_position_mm"] = (np.sqrt(np.diag(s.covariance)[3:]) * 1e3).tolist()
+            entry["sigma_rotation_deg"] = np.degrees(np.sqrt(np.diag(s.covariance)[:3])).tolist()
+        out[str(k)] = entry
+    return out
+
+
+def error_summary(errors: list[PoseError]) -> dict[str, Any]:
+    """Paper-style errors per station (|X|, |Y|, |Z| mm, |alpha|, |beta|, |gamma| deg)."""
+    return {str(e.station): {"position_mm": (e.position_m * 1e3).tolist(),
+                             "euler_deg": np.degrees(e.euler_rad).tolist(),
+                             "position_norm_mm": e.position_norm_m * 1e3,
+                             "rotation_deg": math.degrees(e.rotation_rad)}
+            for e in errors}
+
+
+def _json_safe(value: Any) -> Any:
+    """NaN/inf become null; numpy scalars become Python numbers."""
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def method_options(config: SolveConfig, method: str) -> dict[str, Any]:
+    """The solver options a method ran with."""
+    if method == "graph":
+        options = asdict(config.graph)
+        if config.reference is not None:
+            options["reference"] = config.reference
+        return options
+    from lhgraph.estimation.baseline import PaperOptions
+
+    return {**asdict(PaperOptions()), "reference": config.reference}
+
+
+def summarise(config: SolveConfig, inputs: SolveInputs, result: SolveResult,
+              errors: list[PoseError] | None, hashes: dict[str, dict[str, str]],
+              load_s: float) -> dict[str, Any]:
+    """The ``summary.json`` document of one method's run (docs/workflow.md)."""
+    return _json_safe({
+        "method": result.method,
+        "status": result.status,
+        "iterations": result.iterations,
+        "final_error": result.final_error,
+        "error_history": result.error_history,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "versions": versions(),
+        "inputs": hashes,
+        "seed": config.seed,
+        "options": method_options(config, result.method),
+        "hits": len(inputs.angles),
+        "stations": station_summary(result.stations),
+        "reference": result.stations.reference,
+        "residuals": residual_statistics(result.residuals) if result.residuals else None,
+        "errors": error_summary(errors) if errors is not None else None,
+        "timings_s": {"load": load_s, **result.timings_s},
+        "warnings": result.warnings,
+        "decode": inputs.notes,
+    })
+
+
+def save_residuals(res: Residuals, path: str | Path, overwrite: bool = False) -> Path:
+    """Write ``residuals.csv``: time, lighthouse, axis, sensor, residual_rad, weight."""
+    return write_csv_columns(
+        path, {"time": res.time, "lighthouse": res.lighthouse, "axis": res.axis,
+               "sensor": res.sensor, "residual_rad": res.residual_rad, "weight": res.weight},
+        {"time": "{:.9f}", "lighthouse": "{:d}", "axis": "{:d}", "sensor": "{:d}",
+         "residual_rad": "{:.6e}", "weight": "{:.4f}"}, overwrite)
+
+
+def planned_files(output: Path, methods: list[str]) -> list[Path]:
+    """Every file a run directory for ``methods`` will hold."""
+    if len(methods) == 1:
+        return [output / name for name in RUN_FILES]
+    return ([output / m / name for m in methods for name in RUN_FILES]
+            + [output / name for name in COMPARISON_FILES])
+
+
+def _write_json(path: Path, data: dict[str, Any], overwrite: bool) -> Path:
+    return write_atomic(path, (json.dumps(data, indent=2) + "\n").encode(), overwrite)
+
+
+def run_to_directory(config: SolveConfig, output: str | Path, overwrite: bool = False,
+                     progress: Callable[[str], None] | None = None) -> RunDirectory:
+    """Solve the config with each of its methods and write the run directory ``output``.
+
+    Refuses (InputError, nothing written) when any target file exists and not ``overwrite``,
+    or when ``output`` is an existing file.
+    """
+    from lhgraph.report.html import comparison_report, method_report
+
+    output = Path(output)
+    if output.exists() and not output.is_dir():
+        raise InputError("exists and is not a directory", output)
+    if config.trajectory is not None:
+        raise InputError("'trajectory' is for a stations-TOML output; a run directory always "
+                         "holds trajectory.csv", config.path, "trajectory")
+    methods = config.method_list()
+    for target in planned_files(output, methods):
+        check_writable(target, overwrite)
+    say = progress or (lambda _msg: None)
+    tic = time.perf_counter()
+    inputs = load_inputs(config)
+    load_s = time.perf_counter() - tic
+    hashes = {k: {"path": str(p), "sha256": sha256_of(p)}
+              for k, p in input_files(config).items()}
+    truth = load_stations(config.truth) if config.truth else None
+    say(f"loaded {len(inputs.angles)} hits of stations {inputs.angles.stations()} "
+        f"in {load_s:.2f} s")
+    runs: list[MethodRun] = []
+    files: list[Path] = []
+    for method in methods:
+        say(f"[{method}] solving")
+        result = solve(inputs.board, inputs.angles, method, inputs.models, config.reference,
+                       config.graph, lambda msg, m=method: say(f"[{m}] {msg}"),
+                       world_up=inputs.world_up)
+        errors = station_errors(truth, result.stations) if truth is not None else None
+        summary = summarise(config, inputs, result, errors, hashes, load_s)
+        folder = output if len(methods) == 1 else output / method
+        files.append(save_stations(result.stations, folder / "stations.toml", overwrite))
+        if result.trajectory is not None:
+            files.append(save_trajectory(result.trajectory, folder / "trajectory.csv",
+                                         overwrite))
+        if result.residuals is not None:
+            files.append(save_residuals(result.residuals, folder / "residuals.csv", overwrite))
+        run = MethodRun(method, result, errors, summary, folder)
+        say(f"[{method}] writing the report")
+        tic = time.perf_counter()
+        html = method_report(run, inputs.angles, truth)
+        summary["timings_s"]["report"] = time.perf_counter() - tic
+        files.append(_write_json(folder / "summary.json", summary, overwrite))
+        files.append(write_atomic(folder / "report.html", html.encode(), overwrite))
+        runs.append(run)
+    report = output / "report.html"
+    if len(methods) > 1:
+        comparison = _json_safe({"methods": methods, "inputs": hashes, "seed": config.seed,
+                                 "versions": versions(),
+                                 "runs": {r.method: f"{r.method}/summary.json" for r in runs},
+                                 "comparison": comparison_rows(runs)})
+        files.append(_write_json(output / "summary.json", comparison, overwrite))
+        files.append(write_atomic(report, comparison_report(runs, truth).encode(), overwrite))
+    return RunDirectory(output, runs, report, files)
+
+
+def solve_seconds(result: SolveResult) -> float:
+    """Solver wall time: its ``total`` timing, else the sum of its stages."""
+    t = result.timings_s
+    return float(t.get("total", sum(t.values())))
+
+
+def comparison_rows(runs: list[MethodRun]) -> list[dict[str, Any]]:
+    """One row per (method, non-reference station): errors (when known), rms, time."""
+    rows = []
+    for run in runs:
+        s = run.summary
+        by_station = s["errors"] or {}
+        for k in run.result.stations.indices():
+            if k == run.result.stations.reference:
+                continue
+            e = by_station.get(str(k))
+            rows.append({"method": run.method, "station": k,
+                         "position_norm_mm": e["position_norm_mm"] if e else None,
+                         "rotation_deg": e["rotation_deg"] if e else None,
+                         "position_mm": e["position_mm"] if e else None,
+                         "euler_deg": e["euler_deg"] if e else None,
+                         "rms_urad": (s["residuals"] or {}).get("rms_urad"),
+                         "inlier_fraction": (s["residuals"] or {}).get("inlier_fraction"),
+                         "seconds": solve_seconds(run.result)})
+    return rows
+
+
+def format_comparison(rows: list[dict[str, Any]]) -> str:
+    """Plain-text table of :func:`comparison_rows`."""
+    lines = [f"{'method':>7} {'station':>7} {'|p| mm':>9} {'angle deg':>9} {'rms urad':>9} "
+             f"{'time s':>7}"]
+
+    def num(v: float | None, fmt: str) -> str:
+        return format(v, fmt) if v is not None else format("-", fmt.split(".")[0] + "s")
+
+    for r in rows:
+        lines.append(f"{r['method']:>7} {r['station']:>7} {num(r['position_norm_mm'], '9.3f')} "
+                     f"{num(r['rotation_deg'], '9.4f')} {num(r['rms_urad'], '9.1f')} "
+                     f"{num(r['seconds'], '7.2f')}")
+    return "\n".join(lines)
