@@ -29,7 +29,6 @@ import argparse
 import tempfile
 import time
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 
@@ -37,7 +36,7 @@ from lhgraph.errors import LhgraphError
 from lhgraph.estimation.baseline import solve_paper
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
-from lhgraph.estimation.init.pnp_kabsch import consistent_path
+from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser, consistent_path
 from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.estimation.result import SolveResult
 from lhgraph.importers.hive import align_to_mocap, import_hive, tracker_board_poses
@@ -72,8 +71,8 @@ def run(method: str, board: Board, angles: Angles, models: dict[int, StationMode
         if method == "paper":
             result = solve_paper(board, angles, models)
         elif method == "graph+tracker-init":
-            with mock.patch("lhgraph.estimation.graph.solver.board_poses", tracker_board_poses):
-                result = solve_graph(board, angles, models, options)
+            result = solve_graph(board, angles, models, options,
+                                 initialiser=PnPKabschInitialiser(tracker_board_poses))
         else:
             result = solve_graph(board, angles, models, options)
     except LhgraphError as e:

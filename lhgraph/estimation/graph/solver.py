@@ -27,7 +27,8 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
 from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.init.pnp_kabsch import Initialisation, initialise
+from lhgraph.estimation.init import Initialiser
+from lhgraph.estimation.init.pnp_kabsch import Initialisation, PnPKabschInitialiser
 from lhgraph.estimation.problem import GraphProblem, build_problem
 from lhgraph.estimation.residuals import (
     bearing_residuals,
@@ -484,12 +485,13 @@ def _optimise(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, problem: 
 
 
 def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | None = None,
-                options: GraphOptions | None = None, progress: Progress | None = None
-                ) -> SolveResult:
+                options: GraphOptions | None = None, progress: Progress | None = None,
+                initialiser: Initialiser | None = None) -> SolveResult:
     """Calibrate every station's pose ``T_world_lh`` by the joint factor graph.
 
     ``angles`` as measured (rad, before factory correction), ``models`` the station models by
     index (factory calibration, rotor offsets). The world frame is the reference station's.
+    ``initialiser`` gives the initial values (default :class:`PnPKabschInitialiser`).
     """
     options = options or GraphOptions()
     models = models or {}
@@ -502,7 +504,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     problem = build_problem(board, angles, models, reference)
-    init = initialise(board, angles, problem)
+    init = (initialiser or PnPKabschInitialiser())(board, angles, problem)
     timings["initialise"] = time.perf_counter() - t0
     if progress:
         progress(f"initialised {problem.n_states} board states, {len(problem.hits.angle)} hits")

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
-from lhgraph.estimation.init.pnp import board_poses
+from lhgraph.estimation.init.pnp import PnPResult, board_poses
 from lhgraph.estimation.problem import GraphProblem
 from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.geometry.kabsch import weighted_kabsch
@@ -22,7 +22,9 @@ from lhgraph.io.angles import Angles
 from lhgraph.model.board import Board
 
 Array = NDArray[np.float64]
-Progress = Callable[[str], None]
+PoseSolver = Callable[..., PnPResult]
+"""Per-measurement board pose in one station's frame: ``(azimuth, elevation, positions,
+normals, model) -> PnPResult`` (the signature of :func:`board_poses`)."""
 
 
 @dataclass
@@ -36,27 +38,27 @@ class Initialisation:
     overlap: list[int] = field(default_factory=list)
 
 
-def _station_path(board: Board, angles: Angles, problem: GraphProblem, slot: int
-                  ) -> tuple[Array, Array, Array]:
+def _station_path(board: Board, angles: Angles, problem: GraphProblem, pose_solver: PoseSolver,
+                  slot: int) -> tuple[Array, Array, Array]:
     """Station slot's (times, T_lh_board, rms) from merged az/el pairs + PnP."""
     model = problem.models[slot]
     s = problem.station_ids[slot]
     meas = reconstruct_measurements(angles.select(angles.lighthouse == s), board, "merge")
     if len(meas) == 0:
         return np.empty(0), np.empty((0, 4, 4)), np.empty(0)
-    pnp = board_poses(meas.azimuth, meas.elevation, board.positions, board.normals, model)
+    pnp = pose_solver(meas.azimuth, meas.elevation, board.positions, board.normals, model)
     ok = pnp.valid
     ok[ok] = consistent_path(meas.time[ok], pnp.T_lh_board[ok])
     return meas.time[ok], pnp.T_lh_board[ok], pnp.rms_rad[ok]
 
 
-def _station_paths(board: Board, angles: Angles, problem: GraphProblem
-                   ) -> list[tuple[Array, Array, Array]]:
+def _station_paths(board: Board, angles: Angles, problem: GraphProblem,
+                   pose_solver: PoseSolver) -> list[tuple[Array, Array, Array]]:
     """Every station slot's path, the stations in parallel threads (numpy releases the GIL
     in its array loops)."""
     slots = range(len(problem.station_ids))
     with ThreadPoolExecutor(max_workers=min(len(slots), len(os.sched_getaffinity(0)))) as pool:
-        return list(pool.map(partial(_station_path, board, angles, problem), slots))
+        return list(pool.map(partial(_station_path, board, angles, problem, pose_solver), slots))
 
 
 def consistent_path(t: Array, T: Array, window: int = 7, max_jump_m: float = 0.15,
@@ -95,10 +97,12 @@ def _match_times(t_query: Array, t_ref: Array, max_gap_s: float) -> NDArray[np.b
 
 
 def initialise(board: Board, angles: Angles, problem: GraphProblem,
-               max_gap_s: float = 0.05, velocity_span_s: float = 0.01) -> Initialisation:
-    """Initial values from per-station PnP paths and a weighted Kabsch on sensor points;
-    twists from the merged path's change over ``velocity_span_s``."""
-    paths = _station_paths(board, angles, problem)
+               max_gap_s: float = 0.05, velocity_span_s: float = 0.01,
+               pose_solver: PoseSolver = board_poses) -> Initialisation:
+    """Initial values from per-station PnP paths (``pose_solver`` per measurement) and a
+    weighted Kabsch on sensor points; twists from the merged path's change over
+    ``velocity_span_s``."""
+    paths = _station_paths(board, angles, problem, pose_solver)
     t_ref, T_ref, _ = paths[0]
     if len(t_ref) < 2:
         raise SolverError(f"station {problem.station_ids[0]} (reference): too few usable "
@@ -139,3 +143,18 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
                                           np.concatenate([t, t - h, t + h])).reshape(3, -1, 4, 4)
     V0 = se3_log(inverse(before) @ after) / (2 * h)
     return Initialisation(L0, X0, V0, overlap)
+
+
+@dataclass(frozen=True)
+class PnPKabschInitialiser:
+    """The default :class:`~lhgraph.estimation.init.Initialiser`: :func:`initialise` with
+    ``pose_solver`` for the per-measurement board poses (planar homography PnP by default;
+    :func:`lhgraph.importers.hive.tracker_board_poses` suits curved boards)."""
+
+    pose_solver: PoseSolver = board_poses
+    max_gap_s: float = 0.05
+    velocity_span_s: float = 0.01
+
+    def __call__(self, board: Board, angles: Angles, problem: GraphProblem) -> Initialisation:
+        return initialise(board, angles, problem, self.max_gap_s, self.velocity_span_s,
+                          self.pose_solver)
