@@ -1,4 +1,4 @@
-"""The graph solver's options."""
+"""The graph solver's options: a frozen dataclass whose fields declare their allowed values."""
 
 from __future__ import annotations
 
@@ -8,11 +8,16 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from lhgraph.config import check_fields, option
+
 Array = NDArray[np.float64]
 Progress = Callable[[str], None]
 
+LOSSES = ("cauchy", "huber")
+SOLVERS = ("lm", "isam2")
 
-@dataclass
+
+@dataclass(frozen=True)
 class GraphOptions:
     """Solver settings (units in the names; defaults suit 2 MHz LH1 captures).
 
@@ -32,26 +37,32 @@ class GraphOptions:
     board state moved by more than ``board_step_tolerance_rad`` and ``board_step_tolerance_m``
     in the last iteration, or an iteration lowers the error by less than the fraction
     ``relative_tolerance``;
-    ``reference``: station index of the world frame (default: the lowest index present).
+    ``reference``: station index of the world frame (default: the lowest index present);
+    ``weak_link_sigma_m``: a station whose position 1-sigma exceeds it is reported as weakly
+    linked. Each field's allowed range is declared next to it; a value outside it raises
+    :class:`~lhgraph.errors.InputError` naming the field.
     """
 
-    angle_sigma_rad: float = 4e-5
-    sweep_offset_sigma_rad: float = 5.5e-5
-    huber_k: float = 3.0
-    loss: str = "cauchy"
-    accel_psd_rot: float = 10.0
-    accel_psd_pos: float = 1.0
-    adapt_motion_prior: bool = True
-    max_psd_factor: float = 10.0
-    adapt_angle_sigma: bool = True
-    max_sigma_factor: float = 10.0
-    min_psd_factor: float = 0.2
-    motion_prior_rounds: int = 5
-    solver: str = "lm"
-    max_iterations: int = 60
-    relative_tolerance: float = 1e-5
-    step_tolerance_sigma: float = 0.05
-    board_step_tolerance_rad: float = 1e-3
-    board_step_tolerance_m: float = 1e-4
-    reference: int | None = None
-    weak_link_sigma_m: float = 0.02
+    angle_sigma_rad: float = option(4e-5, gt=0)
+    sweep_offset_sigma_rad: float = option(5.5e-5, gt=0)
+    huber_k: float = option(3.0, gt=0)
+    loss: str = option("cauchy", choices=LOSSES)
+    accel_psd_rot: float = option(10.0, gt=0)
+    accel_psd_pos: float = option(1.0, gt=0)
+    adapt_motion_prior: bool = option(True)
+    max_psd_factor: float = option(10.0, ge=1)
+    adapt_angle_sigma: bool = option(True)
+    max_sigma_factor: float = option(10.0, ge=1)
+    min_psd_factor: float = option(0.2, gt=0, le=1)
+    motion_prior_rounds: int = option(5, ge=0)
+    solver: str = option("lm", choices=SOLVERS)
+    max_iterations: int = option(60, gt=0)
+    relative_tolerance: float = option(1e-5, ge=0, lt=1)
+    step_tolerance_sigma: float = option(0.05, ge=0)
+    board_step_tolerance_rad: float = option(1e-3, ge=0)
+    board_step_tolerance_m: float = option(1e-4, ge=0)
+    reference: int | None = option(None, kind=int, ge=0)
+    weak_link_sigma_m: float = option(0.02, gt=0)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
