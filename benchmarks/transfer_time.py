@@ -96,7 +96,7 @@ def build_virtual_board() -> Path:
 
 def measure(baud: float, n_records: int, capture: Path | None = None) -> dict[str, float]:
     """Download a capture (default: a synthetic 8 s one) from virtual_board paced at ``baud``."""
-    from lhgraph.device.client import download_capture
+    from lhgraph.device.download import download_capture
 
     exe = build_virtual_board()
     with tempfile.TemporaryDirectory() as tmp:

@@ -230,7 +230,8 @@ def add_capture(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run_capture(args: argparse.Namespace) -> int:
-    from lhgraph.device.client import ProgressBar, download_capture
+    from lhgraph.device.download import download_capture
+    from lhgraph.device.progress import ProgressBar
 
     bar = None if args.quiet else ProgressBar(sys.stderr)
     try:

@@ -22,16 +22,15 @@ from pathlib import Path
 
 import pytest
 
-from lhgraph.device.client import (
+from lhgraph.device.download import CaptureDownload, download_capture
+from lhgraph.device.progress import ProgressBar
+from lhgraph.device.protocol import (
     CMD_READ,
     RESP_FLAG,
     BoardStatus,
-    CaptureDownload,
-    ProgressBar,
     cobs_decode,
     cobs_encode,
     decode_frame,
-    download_capture,
     encode_frame,
 )
 from lhgraph.errors import DeviceError, InputError

@@ -1,11 +1,13 @@
 """Shared readers for the contract's TOML and CSV files, with one-line validation errors.
 
 Every problem raises :class:`~lhgraph.errors.InputError` naming the file and the key or row.
-Writers never overwrite an existing file unless asked.
+Every output goes through :func:`write_atomic` (temporary file, fsync, rename; never
+replaces an existing file unless asked).
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 import os
@@ -38,22 +40,76 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise InputError("not a text file", path) from None
 
 
-def check_writable(path: str | Path, overwrite: bool) -> Path:
-    """Refuse to replace an existing file unless ``overwrite``; create parent directories."""
+def check_writable(path: str | Path, overwrite: bool, *, create_parents: bool = True) -> Path:
+    """Refuse an output ``path`` that cannot be written, before any work is done.
+
+    InputError when ``path`` is a directory, exists and not ``overwrite``, or lies under a
+    regular file or in a directory that is not writable. Missing parent directories are
+    created when ``create_parents``, else only checked (nothing is created).
+    """
     path = Path(path)
+    if path.is_dir():
+        raise InputError("is a directory", path)
     if path.exists() and not overwrite:
         raise InputError("exists already (use --force to overwrite)", path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    base = path.parent
+    while not base.exists() and base != base.parent:
+        base = base.parent
+    if not base.is_dir():
+        raise InputError("is not a directory", base)
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise InputError("directory is not writable", base)
+    if create_parents:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise InputError(f"cannot create the directory: {exc.strerror or exc}",
+                             path.parent) from None
     return path
 
 
 def write_atomic(path: str | Path, data: bytes, overwrite: bool = False) -> Path:
-    """Write bytes through a temporary file and rename, so no half file ever appears."""
+    """Write ``data`` to ``path`` so that no half file ever appears under that name.
+
+    The bytes go to a temporary file in the same directory, are flushed to the disk
+    (fsync), then the file is renamed to ``path``. An existing ``path`` is never replaced
+    unless ``overwrite`` (also not one that appears while writing: the final step is a hard
+    link, which fails when the name exists). Missing parent directories are created. Any
+    failure raises InputError naming the file; the temporary file is removed.
+    """
     path = check_writable(path, overwrite)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{os.urandom(4).hex()}.part")
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    except OSError as exc:
+        raise InputError(f"cannot write here: {exc.strerror or exc}", path.parent) from None
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        if overwrite:
+            os.replace(tmp, path)
+        else:
+            _rename_no_clobber(tmp, path)
+    except OSError as exc:
+        raise InputError(f"cannot write: {exc.strerror or exc}", path) from None
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
     return path
+
+
+def _rename_no_clobber(tmp: Path, path: Path) -> None:
+    """Give ``tmp`` the name ``path`` unless that name exists (atomic where links work)."""
+    try:
+        os.link(tmp, path)  # fails if the name exists
+    except FileExistsError:
+        raise InputError("exists already (use --force to overwrite)", path) from None
+    except OSError:  # no hard links on this file system: check, then rename
+        if path.exists():
+            raise InputError("exists already (use --force to overwrite)", path) from None
+        os.replace(tmp, path)
 
 
 def write_toml(path: str | Path, data: dict[str, Any], overwrite: bool = False) -> Path:
