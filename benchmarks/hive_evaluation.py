@@ -44,8 +44,8 @@ from lhgraph.io.angles import Angles, load_angles
 from lhgraph.io.trajectory import Trajectory, load_trajectory
 from lhgraph.model.board import Board, load_board
 from lhgraph.model.lh1 import Convention, StationModel
+from lhgraph.workflow.inputs import station_models
 from lhgraph.workflow.metrics import station_errors
-from lhgraph.workflow.solve import station_models
 from lhgraph.workflow.window import motion_start
 
 REPO = Path(__file__).resolve().parents[1]

@@ -27,7 +27,7 @@ from lhgraph.io.files import check_writable
 from lhgraph.model.lh1 import Convention
 from lhgraph.signal.decode import decode_file
 from lhgraph.signal.libsurvive import read_libsurvive_board, read_libsurvive_poses
-from lhgraph.workflow.solve import models_of
+from lhgraph.workflow.inputs import models_of
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT = ROOT.parent / "shared/data/libsurvive-lh1/lh1_test_cal.rec.gz"

@@ -77,6 +77,8 @@ COMMANDS.append(("simulate", add_simulate, run_simulate))
 
 
 def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from lhgraph.workflow.solve_config import METHODS, WORLDS
+
     p = sub.add_parser("solve", help="calibrate the station poses",
                        description="Calibrate the stations' poses from a board capture's angles "
                        "(docs/solve.md). Either a CONFIG.toml or --board/--angles/--output.")
@@ -85,14 +87,14 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--angles", help="angles CSV")
     p.add_argument("--output", "-o", help="stations TOML to write (with a CONFIG: a path "
                    "without .toml or an existing directory = a run directory, docs/workflow.md)")
-    p.add_argument("--method", choices=("graph", "paper"), help="default: graph")
+    p.add_argument("--method", choices=METHODS, help="default: graph")
     p.add_argument("--trajectory", help="also write the board trajectory CSV")
     p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
     p.add_argument("--truth", help="true stations TOML: print the errors")
     p.add_argument("--reference", type=int, help="station index of the world frame")
     p.add_argument("--duration", type=float, metavar="S",
                    help="solve only the first S seconds in which the board moves")
-    p.add_argument("--world", choices=("reference", "gravity"),
+    p.add_argument("--world", choices=WORLDS,
                    help="world frame: the reference station's (default) or gravity-aligned, "
                    "z up from the stations' OOTX accelerometer vectors")
     _add_common_output(p)
@@ -100,20 +102,25 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run_solve(args: argparse.Namespace) -> int:
+    from dataclasses import replace
     from pathlib import Path
 
+    from lhgraph.config import override
     from lhgraph.errors import InputError
-    from lhgraph.io.stations import load_stations
     from lhgraph.report.text import print_solution
-    from lhgraph.workflow.metrics import station_errors
     from lhgraph.workflow.rundir import (
         comparison_rows,
         format_comparison,
         is_run_directory,
         run_to_directory,
     )
-    from lhgraph.workflow.solve import SolveConfig, load_solve_config, run_config, write_solution
+    from lhgraph.workflow.solve import solve_to_files
+    from lhgraph.workflow.solve_config import SolveConfig, load_solve_config
 
+    flags = {f"--{name}": (name, getattr(args, name))
+             for name in ("output", "method", "trajectory", "calibration", "truth", "reference",
+                          "world")}
+    flags["--duration"] = ("duration_s", args.duration)
     if args.config:
         config = load_solve_config(args.config)
     else:
@@ -121,20 +128,14 @@ def run_solve(args: argparse.Namespace) -> int:
         if missing:
             raise InputError("give a CONFIG.toml or all of --board, --angles, --output "
                              f"(missing: {', '.join('--' + m for m in missing)})")
-        config = SolveConfig(Path(args.board), Path(args.angles), Path(args.output))
-    for key in ("output", "method", "trajectory", "calibration", "truth", "reference"):
-        value = getattr(args, key)
-        if value is not None:
-            setattr(config, key, Path(value) if key not in ("method", "reference") else value)
-    if args.duration is not None:
-        config.duration_s = args.duration
-    if args.world is not None:
-        config.world = args.world
+        config = SolveConfig(board=Path(args.board))
+        flags["--angles"] = ("angles", args.angles)
+    config = override(config, flags)
+    if args.method is not None:
+        config = replace(config, methods=None)
     if config.output is None:
         raise InputError("no output: give --output or set 'output' in the config")
     progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
-    if args.method is not None:
-        config.methods = None
     if args.config and is_run_directory(config.output):
         run = run_to_directory(config, config.output, args.force, progress)
         if not args.quiet:
@@ -144,16 +145,7 @@ def run_solve(args: argparse.Namespace) -> int:
                 print(format_comparison(comparison_rows(run.runs)))
             print(f"wrote {len(run.files)} files to {run.directory}; report: {run.report}")
         return 0
-    if len(config.method_list()) > 1:
-        raise InputError("several methods need a run directory output (a path without "
-                         ".toml)", config.output)
-    for target in (config.output, config.trajectory):
-        if target is not None and Path(target).exists() and not args.force:
-            raise InputError("exists already (use --force to overwrite)", target)
-    truth = load_stations(config.truth) if config.truth else None
-    result = run_config(config, progress)
-    written = write_solution(result, config.output, config.trajectory, overwrite=args.force)
-    errors = station_errors(truth, result.stations) if truth else None
+    result, errors, written = solve_to_files(config, args.force, progress)
     if not args.quiet:
         print_solution(result, errors)
         print(f"wrote {', '.join(str(p) for p in written)}")

@@ -29,7 +29,8 @@ from lhgraph.importers.hive import import_hive
 from lhgraph.io.angles import load_angles
 from lhgraph.model.board import load_board
 from lhgraph.report.text import format_solution
-from lhgraph.workflow.solve import solve, station_models
+from lhgraph.workflow.inputs import station_models
+from lhgraph.workflow.solve import solve
 
 REPO = Path.cwd().parent if Path.cwd().name == "notebooks" else Path.cwd()
 BAG = REPO.parent / "shared" / "data" / "hive-env8" / "data8.11.bag"

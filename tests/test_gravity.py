@@ -25,7 +25,7 @@ from lhgraph.model.board import load_board
 from lhgraph.signal.decode import decode_file
 from lhgraph.sim.capture_sim import default_calibrations
 from lhgraph.sim.simulate import load_simulation_config, simulate
-from lhgraph.workflow.solve import models_of
+from lhgraph.workflow.inputs import models_of
 
 ROOT = Path(__file__).resolve().parent.parent
 FIXTURE = ROOT / "tests" / "data" / "libsurvive" / "lh1_test_cal_hmd_7s.rec.gz"

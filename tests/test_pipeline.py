@@ -12,7 +12,7 @@ from lhgraph.signal.capture import read_capture
 from lhgraph.signal.decode import decode_capture
 from lhgraph.sim.capture_sim import write_simulated_capture
 from lhgraph.sim.simulate import load_simulation_config, simulate
-from lhgraph.workflow.solve import models_of
+from lhgraph.workflow.inputs import models_of
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "simulation" / "realistic.toml"
 

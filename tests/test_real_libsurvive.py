@@ -11,7 +11,7 @@ from lhgraph.geometry.transforms import inverse, rotation_angle
 from lhgraph.model.board import load_board
 from lhgraph.signal.decode import decode_file
 from lhgraph.signal.libsurvive import read_libsurvive_board, read_libsurvive_poses
-from lhgraph.workflow.solve import models_of
+from lhgraph.workflow.inputs import models_of
 
 FIXTURE = Path(__file__).resolve().parent / "data" / "libsurvive" / "lh1_test_cal_hmd_7s.rec.gz"
 

@@ -16,7 +16,7 @@ from lhgraph.io.files import read_csv_columns
 from lhgraph.io.stations import load_stations
 from lhgraph.sim.simulate import default_simulation_config, simulate, write_simulation
 from lhgraph.workflow.rundir import is_run_directory, run_to_directory
-from lhgraph.workflow.solve import load_solve_config
+from lhgraph.workflow.solve_config import load_solve_config
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ from lhgraph.model.board import save_board
 from lhgraph.report.viewer import build_scene, export, frustum_segments
 from lhgraph.sim.simulate import default_simulation_config, simulate
 from lhgraph.workflow.rundir import run_to_directory
-from lhgraph.workflow.solve import SolveConfig
+from lhgraph.workflow.solve_config import SolveConfig
 
 
 @pytest.fixture(scope="module")

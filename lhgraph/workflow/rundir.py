@@ -31,8 +31,10 @@ from lhgraph.geometry.transforms import matrix_to_quat
 from lhgraph.io.files import check_writable, write_atomic, write_csv_columns
 from lhgraph.io.stations import Stations, load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
+from lhgraph.workflow.inputs import SolveInputs, check_inputs, load_inputs
 from lhgraph.workflow.metrics import PoseError, station_errors
-from lhgraph.workflow.solve import SolveConfig, SolveInputs, load_inputs, solve
+from lhgraph.workflow.solve import solve
+from lhgraph.workflow.solve_config import SolveConfig
 
 RUN_FILES = ("stations.toml", "trajectory.csv", "residuals.csv", "summary.json", "report.html")
 COMPARISON_FILES = ("summary.json", "report.html")
@@ -232,6 +234,7 @@ def run_to_directory(config: SolveConfig, output: str | Path, overwrite: bool = 
         raise InputError("'trajectory' is for a stations-TOML output; a run directory always "
                          "holds trajectory.csv", config.path, "trajectory")
     methods = config.method_list()
+    check_inputs(config)
     for target in planned_files(output, methods):
         check_writable(target, overwrite)
     say = progress or (lambda _msg: None)

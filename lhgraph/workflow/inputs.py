@@ -1,0 +1,99 @@
+"""What a solve configuration's files hold: board, angles (read or decoded), station models.
+
+:func:`check_inputs` refuses missing input files before anything is written;
+:func:`load_inputs` reads them all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.errors import InputError
+from lhgraph.estimation.gravity import up_vectors
+from lhgraph.io.angles import Angles, load_angles
+from lhgraph.model.board import Board, load_board
+from lhgraph.model.calibration import StationCalibration, load_calibration
+from lhgraph.model.lh1 import Convention, StationModel
+from lhgraph.workflow.solve_config import SolveConfig
+
+
+def station_models(calibration_path: str | Path | None,
+                   convention: Convention | None = None) -> dict[int, StationModel]:
+    """Station models from an ``ootx.toml`` (empty: ideal stations)."""
+    if calibration_path is None:
+        return {}
+    return models_of(load_calibration(calibration_path), convention)
+
+
+def models_of(calibrations: dict[int, StationCalibration],
+              convention: Convention | None = None) -> dict[int, StationModel]:
+    """Station models (by index) from decoded or loaded factory calibrations."""
+    convention = convention or Convention()
+    return {k: StationModel(c.calibration, convention=convention)
+            for k, c in calibrations.items()}
+
+
+@dataclass
+class SolveInputs:
+    """What a config's files hold: board, angles, station models, decoder report lines, and
+    the stations' up vectors when the config asks for a gravity-aligned world."""
+
+    board: Board
+    angles: Angles
+    models: dict[int, StationModel]
+    notes: list[str] = field(default_factory=list)
+    world_up: dict[int, NDArray[np.float64]] | None = None
+
+
+def check_inputs(config: SolveConfig) -> None:
+    """InputError unless every input file the config names exists and is a file (run before
+    any output is created, so a bad input leaves nothing behind)."""
+    for name in ("board", "angles", "capture", "calibration", "truth"):
+        path = getattr(config, name)
+        if path is None:
+            continue
+        if not path.exists():
+            raise InputError(f"{name} file not found", path)
+        if not path.is_file():
+            raise InputError(f"is a directory, expected the {name} file", path)
+
+
+def load_inputs(config: SolveConfig) -> SolveInputs:
+    """Read the board, the angles (or decode the capture) and the station models."""
+    check_inputs(config)
+    board = load_board(config.board)
+    notes: list[str] = []
+    calibrations = load_calibration(config.calibration) if config.calibration else {}
+    if config.capture is not None:
+        from lhgraph.signal.decode import decode_file
+
+        decoded, warnings = decode_file(config.capture, board=board)
+        angles = decoded.angles
+        notes = [*warnings, *decoded.report.lines()]
+        if config.calibration is None:
+            calibrations = decoded.calibrations
+        source: Path = config.capture
+    elif config.angles is not None:
+        angles = load_angles(config.angles)
+        source = config.angles
+    else:
+        raise InputError("no angles: give 'angles' or 'capture'", config.path, "angles")
+    angles.check_board(board, source)
+    if config.duration_s is not None:
+        from lhgraph.workflow.window import moving_window
+
+        angles = moving_window(angles, config.duration_s)
+        notes.append(f"solved {config.duration_s:g} s from the start of motion "
+                     f"(t = {angles.time[0]:.3f} s)")
+    world_up = None
+    if config.world == "gravity":
+        world_up = up_vectors(calibrations)
+        if not world_up:
+            raise InputError("world = 'gravity' needs the stations' accelerometer vectors "
+                             "(accel_dir in an ootx.toml, or a capture's OOTX): none given",
+                             config.calibration or config.capture or config.path, "world")
+    return SolveInputs(board, angles, models_of(calibrations), notes, world_up)

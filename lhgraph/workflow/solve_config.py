@@ -1,0 +1,82 @@
+"""The solve configuration file that ``lhgraph solve CONFIG.toml`` takes (docs/solve.md).
+
+:class:`SolveConfig` is frozen and declares each key's allowed values
+(:mod:`lhgraph.config`); :func:`load_solve_config` reads and checks a file, the CLI's flags
+replace fields with :func:`lhgraph.config.override`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lhgraph.config import Table, check_fields, option, rules
+from lhgraph.errors import InputError
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.io.files import read_toml
+
+METHODS = ("graph", "paper")
+WORLDS = ("reference", "gravity")
+
+
+@dataclass(frozen=True)
+class SolveConfig:
+    """A solve described by a file: inputs, method(s) and options (paths absolute).
+
+    The angles come from ``angles`` or, when ``capture`` is set instead, from decoding that
+    capture (its OOTX calibration is used unless ``calibration`` is given). ``methods``
+    (several methods, run directory output only) overrides ``method``; ``seed`` is recorded
+    in a run directory's summary; ``path`` is the configuration file itself; ``duration_s``
+    (old spelling ``duration``) keeps only that many seconds from the moment the board starts
+    moving; ``world`` is ``"reference"`` (the reference station's frame) or ``"gravity"``
+    (z up from the stations' OOTX accelerometer vectors, :mod:`lhgraph.estimation.gravity`).
+    """
+
+    board: Path = option(kind=Path)
+    angles: Path | None = option(None, kind=Path)
+    output: Path | None = option(None, kind=Path)
+    method: str = option("graph", choices=METHODS)
+    calibration: Path | None = option(None, kind=Path)
+    trajectory: Path | None = option(None, kind=Path)
+    truth: Path | None = option(None, kind=Path)
+    reference: int | None = option(None, kind=int, ge=0)
+    graph: GraphOptions = field(default_factory=GraphOptions)
+    capture: Path | None = option(None, kind=Path)
+    methods: tuple[str, ...] | None = None
+    seed: int | None = option(None, kind=int)
+    path: Path | None = None
+    duration_s: float | None = option(None, kind=float, gt=0, alias="duration")
+    world: str = option("reference", choices=WORLDS)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+    def method_list(self) -> list[str]:
+        """The methods to run, in order."""
+        return list(self.methods) if self.methods else [self.method]
+
+
+def load_solve_config(path: str | Path) -> SolveConfig:
+    """Read a solve configuration; relative paths are relative to the file's folder."""
+    path = Path(path)
+    table = Table(read_toml(path), path, "", path.parent)
+    declared = rules(SolveConfig)
+    table.refuse_unknown({*declared, "duration", "graph", "methods"})
+    methods = table.get("methods")
+    if methods is not None:
+        if "method" in table:
+            raise InputError("give 'method' or 'methods', not both", path, "methods")
+        if (not isinstance(methods, list) or not methods
+                or any(m not in METHODS for m in methods) or len(set(methods)) != len(methods)):
+            raise InputError(f"expected a non-empty list of distinct methods from "
+                             f"{', '.join(METHODS)}, got {methods!r}", path, "methods")
+        methods = tuple(methods)
+    if ("angles" in table) == ("capture" in table):
+        raise InputError("give exactly one of 'angles' and 'capture'", path,
+                         "angles" if "angles" in table else "capture")
+    board = table.path("board", required=True)
+    values = {name: table.value(name, rule, None) for name, rule in declared.items()
+              if name != "board"}
+    given = {k: v for k, v in values.items() if v is not None}
+    return SolveConfig(board=board, graph=table.options("graph", GraphOptions),
+                       methods=methods, path=path, **given)
