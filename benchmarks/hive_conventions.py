@@ -23,13 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from lhgraph.geometry.transforms import so3_log
-from lhgraph.importers.hive import (
-    HIVE_MAPPING,
-    fit_sweep_pairs,
-    read_hive_bag,
-    station_calibrations,
-    sweep_pairs,
-)
+from lhgraph.importers.hive import read_hive_bag
+from lhgraph.importers.hive.conventions import HIVE_MAPPING, station_calibrations
+from lhgraph.importers.hive.mapping_check import fit_sweep_pairs, sweep_pairs
 from lhgraph.model.lh1 import Convention, StationModel
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -109,8 +105,8 @@ def main() -> None:
         "",
         f"`python3 benchmarks/hive_conventions.py --pairs {args.pairs}` — {len(pairs)} sweep "
         "pairs (≥ 12 hits) of data8.11.bag, single-station PnP per pair "
-        "(`lhgraph.importers.hive.single_station_pnp`, axis mapping az=+h el=+v), OOTX terms "
-        "from the bag "
+        "(`lhgraph.estimation.init.pnp_nonplanar.single_station_pnp`, axis mapping "
+        "az=+h el=+v), OOTX terms from the bag "
         "(hive horizontal motor → axis 0).",
         "",
         "| model | rms (µrad) | median (µrad) | rms lh0 | rms lh1 | fits |",

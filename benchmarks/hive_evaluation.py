@@ -16,7 +16,8 @@ Imports ``data8.11.bag`` (read from ../shared, never copied) into a temporary fo
    and the first slice: what one station's view alone gives.
 
 The graph runs twice: with its own initialiser (``lhgraph.estimation.init.pnp.board_poses``)
-and with the non-planar PnP (:func:`lhgraph.importers.hive.tracker_board_poses`) swapped in.
+and with the non-planar PnP
+(:func:`lhgraph.estimation.init.pnp_nonplanar.tracker_board_poses`) swapped in.
 The planar initialiser used to land in mirror poses on the curved tracker; since it fits the
 plane of the seen sensors both give the same solution (docs/results/hive_evaluation.md), so
 the second run is a cross-check of the initialiser. Writes the markdown to ``--output``
@@ -37,9 +38,10 @@ from lhgraph.estimation.baseline import solve_paper
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser, consistent_path
+from lhgraph.estimation.init.pnp_nonplanar import tracker_board_poses
 from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.estimation.result import SolveResult
-from lhgraph.importers.hive import align_to_mocap, import_hive, tracker_board_poses
+from lhgraph.importers.hive import align_to_mocap, import_hive
 from lhgraph.io.angles import Angles, load_angles
 from lhgraph.io.trajectory import Trajectory, load_trajectory
 from lhgraph.model.board import Board, load_board
@@ -122,8 +124,8 @@ def main() -> None:
              f"data8.11.bag ({len(angles)} hits, motion from {t0:.1f} s). Graph = "
              "`solve_graph` with default options (the convention table alone fixes the "
              "per-diode sigma at 40 µrad, so that inlier fractions compare); *tracker init* = "
-             "the same with `lhgraph.importers.hive.tracker_board_poses` replacing the planar PnP "
-             "initialiser. "
+             "the same with `lhgraph.estimation.init.pnp_nonplanar.tracker_board_poses` "
+             "replacing the planar PnP initialiser. "
              "rms = inlier (robust weight > 0.5) residual rms; median = median |residual| of "
              "all hits; trajectory = `align_to_mocap` (world + hand-eye + time offset, "
              "soft-L1) against OptiTrack. " + PAPER_NOTE, ""]
@@ -192,8 +194,8 @@ def main() -> None:
     # 4. each station's own PnP path (no graph, no other station) against OptiTrack
     lines += ["", "## Each station's own path vs OptiTrack", "",
               "Per-measurement poses `T_lh_board` of one station alone "
-              "(`lhgraph.importers.hive.tracker_board_poses` on the merged az/el pairs, "
-              "path filter of the "
+              "(`lhgraph.estimation.init.pnp_nonplanar.tracker_board_poses` on the merged "
+              "az/el pairs, path filter of the "
               "graph initialiser), aligned like the trajectories above: how well each station's "
               "view alone can give the path.", "",
               "| span | station | poses | median rms µrad | RMSE mm | deg | time offset ms |",

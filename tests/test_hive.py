@@ -10,14 +10,10 @@ import numpy as np
 import pytest
 
 from lhgraph.cli import main
-from lhgraph.importers.hive import (
-    CANDIDATE_MAPPINGS,
-    HIVE_MAPPING,
-    AxisMapping,
-    check_mappings,
-    off_grid_sweeps,
-    read_hive_bag,
-)
+from lhgraph.importers.hive import read_hive_bag
+from lhgraph.importers.hive.bag import off_grid_sweeps
+from lhgraph.importers.hive.conventions import CANDIDATE_MAPPINGS, HIVE_MAPPING, AxisMapping
+from lhgraph.importers.hive.mapping_check import check_mappings
 from lhgraph.io.angles import load_angles
 from lhgraph.io.files import read_csv_columns
 from lhgraph.io.trajectory import load_trajectory

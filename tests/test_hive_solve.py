@@ -22,14 +22,11 @@ import numpy as np
 import pytest
 
 from lhgraph.estimation.graph.solver import solve_graph
-from lhgraph.estimation.init.pnp import board_poses
+from lhgraph.estimation.init.pnp import board_poses, facing_fraction
+from lhgraph.estimation.init.pnp_nonplanar import tracker_board_poses
 from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.geometry.transforms import make_pose, pose_from_quat, se3_exp
-from lhgraph.importers.hive import (
-    align_to_mocap,
-    facing_fraction,
-    tracker_board_poses,
-)
+from lhgraph.importers.hive import align_to_mocap
 from lhgraph.io.angles import load_angles
 from lhgraph.io.trajectory import Trajectory, load_trajectory
 from lhgraph.model.board import load_board

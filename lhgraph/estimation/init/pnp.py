@@ -1,11 +1,14 @@
-"""Single-station board pose from sensor directions (vectorised over many measurements).
+"""Planar PnP: single-station board poses from sensor directions (vectorised over many
+measurements), and what every pose solver of this family shares (:class:`PnPResult`, the
+facing test :func:`facing_fraction`).
 
 A station is a pinhole camera looking along +x: a point's ideal angles give the normalised
 image coordinates ``(y/x, z/x) = (tan azimuth, tan elevation)``. Each measurement (one
 azimuth and one elevation sweep of one station) gives a board pose ``T_lh_board`` by a
 homography on the board's dominant plane, refined by Gauss-Newton with Huber weights on the
 full station model. Both solutions of the planar mirror ambiguity are refined and the better
-one is kept.
+one is kept. Curved boards whose sensors no plane fits well (the Vive Tracker) are better
+served by the multi-start solver in :mod:`lhgraph.estimation.init.pnp_nonplanar`.
 """
 
 from __future__ import annotations
@@ -156,14 +159,20 @@ def _residuals(T_lh_board: Array, s: Array, z: Array, model: StationModel,
     return r, np.swapaxes(board_jacobian(J_p.reshape(2, -1, 3), R, s), 0, 1)
 
 
-def _facing(T_lh_board: Array, positions: Array, normals: Array,
-            mask: NDArray[np.bool_]) -> Array:
-    """Fraction of the seen sensors (mask (M, S)) whose normal points toward the station."""
+def facing_fraction(T_lh_board: Array, positions: Array, normals: Array,
+                    seen: NDArray[np.bool_] | None = None) -> Array:
+    """Fraction of sensors whose normal points toward the station, per pose ``(M, 4, 4)``.
+
+    ``positions``/``normals`` (S, 3) in the board frame; ``seen`` (M, S) restricts each pose
+    to the sensors it was fitted on (default: all). A photodiode only sees a station in front
+    of it, so a correct pose has every seen sensor facing (1.0); a mirror solution ~0.
+    """
     p = T_lh_board[:, None, :3, :3] @ positions[None, :, :, None]
     p = p[..., 0] + T_lh_board[:, None, :3, 3]
     n = (T_lh_board[:, None, :3, :3] @ normals[None, :, :, None])[..., 0]
     toward = np.sum(n * p, axis=-1) < 0
-    return np.sum(toward & mask, axis=1) / np.maximum(mask.sum(axis=1), 1)
+    seen = np.ones(toward.shape, dtype=bool) if seen is None else seen
+    return np.sum(toward & seen, axis=1) / np.maximum(seen.sum(axis=1), 1)
 
 
 def _solve_candidates(
@@ -196,8 +205,8 @@ def _solve_candidates(
     Ta, rms_a, _ = _refine(T0, meas, mask, positions, model, first, huber_rad)
     Tb, rms_b, _ = _refine(T1, meas, mask, positions, model, first, huber_rad)
     # a seen sensor must face the station: that rejects the wrong twin on curved boards
-    face_a = _facing(Ta, positions, normals, mask) > 0.8
-    face_b = _facing(Tb, positions, normals, mask) > 0.8
+    face_a = facing_fraction(Ta, positions, normals, mask) > 0.8
+    face_b = facing_fraction(Tb, positions, normals, mask) > 0.8
     better_b = np.where(face_a == face_b, (rms_b < rms_a) | ~np.isfinite(rms_a), face_b)
     T = np.where(better_b[:, None, None], Tb, Ta)
     return _refine(T, meas, mask, positions, model, iterations - first, huber_rad)

@@ -149,7 +149,7 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
 class PnPKabschInitialiser:
     """The default :class:`~lhgraph.estimation.init.Initialiser`: :func:`initialise` with
     ``pose_solver`` for the per-measurement board poses (planar homography PnP by default;
-    :func:`lhgraph.importers.hive.tracker_board_poses` suits curved boards)."""
+    :func:`lhgraph.estimation.init.pnp_nonplanar.tracker_board_poses` suits curved boards)."""
 
     pose_solver: PoseSolver = board_poses
     max_gap_s: float = 0.05
