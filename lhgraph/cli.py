@@ -56,14 +56,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     config = (default_simulation_config() if args.config is None
               else load_simulation_config(args.config))
     capture = simulate(config, args.seed)
-    if args.capture:
-        from lhgraph.io.files import check_writable
-        from lhgraph.sim.capture_sim import CAPTURE_FILE, write_simulated_capture
-
-        check_writable(f"{args.output}/{CAPTURE_FILE}", args.force)
-    paths = write_simulation(capture, args.output, overwrite=args.force)
-    if args.capture:
-        paths["capture"] = write_simulated_capture(capture, args.output, args.force)
+    paths = write_simulation(capture, args.output, args.force, raw_capture=args.capture)
     if not args.quiet:
         print(f"{capture.summary()}; wrote {', '.join(p.name for p in paths.values())} "
               f"to {args.output}")
@@ -165,8 +158,8 @@ def add_decode(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        "(docs/decoding.md).")
     p.add_argument("capture", help="capture file")
     p.add_argument("--output", "-o", required=True, help="output directory")
-    p.add_argument("--format", choices=("lhcap", "raw", "libsurvive"),
-                   help="input format (default: from the file name)")
+    p.add_argument("--format", help="input format, checked by the decoder (the kinds: "
+                   "docs/decoding.md; default: from the file name)")
     p.add_argument("--device", help="libsurvive device name (e.g. HMD)")
     p.add_argument("--board", help="board TOML: drop pulses of sensors not on it")
     p.add_argument("--sample-rate", type=float, help="raw dump sample rate in Hz (2e6)")
@@ -181,18 +174,24 @@ def add_decode(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run_decode(args: argparse.Namespace) -> int:
     from lhgraph.model.board import load_board
-    from lhgraph.signal.decode import DecodeOptions, decode_file, write_decoded
+    from lhgraph.signal.decode import DecodeOptions
+    from lhgraph.signal.formats import (
+        check_output_directory,
+        decode_file,
+        default_period,
+        write_decoded,
+    )
 
+    check_output_directory(args.output, args.force)
     board = load_board(args.board) if args.board else None
-    period = args.period or ("nominal" if args.format == "libsurvive"
-                             or str(args.capture).endswith((".rec", ".rec.gz")) else "fit")
-    options = DecodeOptions(period=period, sync_reference=args.sync)
+    options = DecodeOptions(period=args.period or default_period(args.capture, args.format),
+                            sync_reference=args.sync)
     result, warnings = decode_file(args.capture, args.format, args.device, board, options,
                                    args.sample_rate)
     written = write_decoded(result, args.output, overwrite=args.force)
+    for line in warnings if args.quiet else [*warnings, *result.report.lines()]:
+        print(f"  {line}", file=sys.stderr)  # --quiet never hides what the reader dropped
     if not args.quiet:
-        for line in [*warnings, *result.report.lines()]:
-            print(f"  {line}", file=sys.stderr)
         print(f"{len(result.angles)} sweep hits, OOTX of station(s) "
               f"{sorted(result.calibrations) or 'none'}; wrote "
               f"{', '.join(str(p) for p in written)}")

@@ -17,9 +17,8 @@ from lhgraph.io.trajectory import load_trajectory
 from lhgraph.model.board import load_board
 from lhgraph.model.lh1 import FactoryCalibration, StationModel, predict, sweep_angle
 from lhgraph.signal.pulses import LightPulses
-from lhgraph.sim.simulate import (
+from lhgraph.sim.config import (
     ROTOR_PERIOD_S,
-    SYNC_SPACING_S,
     MotionConfig,
     NoiseConfig,
     VisibilityConfig,
@@ -27,6 +26,9 @@ from lhgraph.sim.simulate import (
     default_simulation_config,
     load_simulation_config,
     paper_protocol,
+)
+from lhgraph.sim.simulate import (
+    SYNC_SPACING_S,
     scene_of,
     simulate,
     solve_hit_times,

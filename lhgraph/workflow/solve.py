@@ -99,7 +99,7 @@ def solve_to_files(config: SolveConfig, overwrite: bool = False,
     check_inputs(config)
     for target in (config.output, config.trajectory):
         if target is not None:
-            check_writable(target, overwrite)
+            check_writable(target, overwrite, create_parents=False)
     truth = load_stations(config.truth) if config.truth else None
     result = run_config(config, progress)
     written = write_solution(result, config.output, config.trajectory, overwrite)
