@@ -33,7 +33,8 @@ KIND_WORDS = {bool: "true or false", int: "an integer", float: "a finite number"
 class Rule:
     """What one option accepts: its ``kind`` (bool, int, float, str or Path), bounds
     (``gt``/``ge`` below, ``lt``/``le`` above), ``choices`` for strings, whether ``None`` is
-    allowed (``optional``) and an old spelling of the key (``alias``)."""
+    allowed (``optional``), an old spelling of the key (``alias``) and whether a float must
+    be ``finite`` (else TOML's ``inf`` is accepted)."""
 
     kind: type
     gt: float | None = None
@@ -43,6 +44,7 @@ class Rule:
     choices: tuple[str, ...] | None = None
     optional: bool = False
     alias: str | None = None
+    finite: bool = True
 
     def allowed(self) -> str:
         """The accepted values in words (``"> 0"``, ``"in (0, 1]"``, ``"one of lm, isam2"``)."""
@@ -71,7 +73,7 @@ class Rule:
             ok = isinstance(value, Integral) and not isinstance(value, bool)
         elif kind is float:
             ok = (isinstance(value, Real) and not isinstance(value, bool)
-                  and math.isfinite(value))
+                  and (math.isfinite(value) or not self.finite and not math.isnan(value)))
         elif kind is Path:
             ok = isinstance(value, str | Path)
         else:
@@ -95,20 +97,28 @@ class Rule:
 def option(default: Any = _MISSING, *, kind: type | None = None, gt: float | None = None,
            ge: float | None = None, lt: float | None = None, le: float | None = None,
            choices: tuple[str, ...] | None = None, alias: str | None = None,
-           factory: Any = _MISSING) -> Any:
+           finite: bool = True, factory: Any = _MISSING) -> Any:
     """A dataclass field with its :class:`Rule`; ``kind`` defaults to the default's type
     (give it when the default is ``None``, which then stays allowed)."""
     if kind is None:
         kind = type(default)
-    rule = Rule(kind, gt, ge, lt, le, choices, default is None, alias)
+    rule = Rule(kind, gt, ge, lt, le, choices, default is None, alias, finite)
     if factory is not _MISSING:
         return dataclasses.field(default_factory=factory, metadata={RULE: rule})
     return dataclasses.field(default=default, metadata={RULE: rule})
 
 
 def rules(cls: type) -> dict[str, Rule]:
-    """The declared rule of every :func:`option` field of a dataclass, by field name."""
-    return {f.name: f.metadata[RULE] for f in dataclasses.fields(cls) if RULE in f.metadata}
+    """The rule of every option field of a dataclass, by field name: the :func:`option`
+    declaration, else (a plain field whose default is a bool, int, float or str) the
+    default's type, with any float accepted for a float field."""
+    out = {}
+    for f in dataclasses.fields(cls):
+        if RULE in f.metadata:
+            out[f.name] = f.metadata[RULE]
+        elif type(f.default) in (bool, int, float, str):
+            out[f.name] = Rule(type(f.default), finite=False)
+    return out
 
 
 def check_fields(obj: Any) -> None:
@@ -222,7 +232,13 @@ def load_options(cls: type[T], data: Any, source: str | Path, where: str = "") -
     table.refuse_unknown(set(declared) | {r.alias for r in declared.values() if r.alias})
     values = {name: table.value(name, rule) for name, rule in declared.items()
               if name in table or (rule.alias is not None and rule.alias in table)}
-    return cls(**values)
+    try:
+        return cls(**values)
+    except InputError as exc:  # a check across fields in the class's __post_init__
+        if exc.source is not None:
+            raise
+        raise InputError(exc.problem, source, table.key(exc.where) if exc.where else where
+                         or None) from None
 
 
 def override(obj: T, flags: Mapping[str, tuple[str, Any]]) -> T:

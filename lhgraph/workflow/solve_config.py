@@ -56,6 +56,15 @@ class SolveConfig:
         return list(self.methods) if self.methods else [self.method]
 
 
+def check_methods(value: object, source: str | Path, where: str = "methods") -> list[str]:
+    """A config's list of methods: non-empty, distinct, each one of :data:`METHODS`."""
+    if (not isinstance(value, list) or not value or any(m not in METHODS for m in value)
+            or len(set(value)) != len(value)):
+        raise InputError(f"expected a non-empty list of distinct methods from "
+                         f"{', '.join(METHODS)}, got {value!r}", source, where)
+    return value
+
+
 def load_solve_config(path: str | Path) -> SolveConfig:
     """Read a solve configuration; relative paths are relative to the file's folder."""
     path = Path(path)
@@ -66,11 +75,7 @@ def load_solve_config(path: str | Path) -> SolveConfig:
     if methods is not None:
         if "method" in table:
             raise InputError("give 'method' or 'methods', not both", path, "methods")
-        if (not isinstance(methods, list) or not methods
-                or any(m not in METHODS for m in methods) or len(set(methods)) != len(methods)):
-            raise InputError(f"expected a non-empty list of distinct methods from "
-                             f"{', '.join(METHODS)}, got {methods!r}", path, "methods")
-        methods = tuple(methods)
+        methods = tuple(check_methods(methods, path))
     if ("angles" in table) == ("capture" in table):
         raise InputError("give exactly one of 'angles' and 'capture'", path,
                          "angles" if "angles" in table else "capture")

@@ -25,13 +25,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from lhgraph.config import Table, check_fields, option, rules
 from lhgraph.errors import InputError, LhgraphError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.geometry.transforms import euler_zyx
-from lhgraph.io.files import as_float, as_int, read_toml, write_atomic
+from lhgraph.io.files import read_toml, write_atomic
 from lhgraph.io.stations import Stations
 from lhgraph.sim.simulate import SimulationConfig, paper_protocol, simulate
-from lhgraph.workflow.solve import METHODS, parse_graph_options, solve
+from lhgraph.workflow.solve import solve
+from lhgraph.workflow.solve_config import METHODS, check_methods
 
 COLUMNS = ["X (mm)", "Y (mm)", "Z (mm)", "alpha (deg)", "beta (deg)", "gamma (deg)"]
 PAPER_MAE = [6.9, 9.3, 8.5, 0.10, 0.17, 0.16]
@@ -106,18 +108,22 @@ def table_iii_markdown(stats: dict[str, ProtocolStatistics]) -> list[str]:
 # --- study configuration -------------------------------------------------------------------
 
 
-@dataclass
+@dataclass(frozen=True)
 class StudyConfig:
-    """A study: protocol file, methods, optional subset and capture length, solver options."""
+    """A study: protocol file, methods, optional subset and capture length, solver options
+    (``paper``: the PaperOptions fields the file sets)."""
 
     protocol: Path
     methods: list[str]
-    setups: int | None = None
-    measurements: int | None = None
-    duration_s: float | None = None
+    setups: int | None = option(None, kind=int, gt=0)
+    measurements: int | None = option(None, kind=int, gt=0)
+    duration_s: float | None = option(None, kind=float, gt=0)
     graph: GraphOptions = field(default_factory=GraphOptions)
     paper: dict[str, Any] = field(default_factory=dict)
     path: Path | None = None
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
     def cases(self) -> list[tuple[str, SimulationConfig]]:
         """The (name, simulation config) of every capture of the study."""
@@ -141,49 +147,21 @@ def load_study_config(path: str | Path) -> StudyConfig:
     from lhgraph.estimation.baseline import PaperOptions
 
     path = Path(path)
-    data = read_toml(path)
-    known = {"protocol", "methods", "setups", "measurements", "duration_s", "graph", "paper"}
-    for key in data:
-        if key not in known:
-            raise InputError(f"unknown key '{key}' (known: {', '.join(sorted(known))})", path,
-                             key)
-    if not isinstance(data.get("protocol"), str):
+    table = Table(read_toml(path), path)
+    table.refuse_unknown({"protocol", "methods", "setups", "measurements", "duration_s",
+                          "graph", "paper"})
+    if not isinstance(table.get("protocol"), str):
         raise InputError("expected the protocol file's path (string)", path, "protocol")
-    methods = data.get("methods", list(METHODS))
-    if (not isinstance(methods, list) or not methods or any(m not in METHODS for m in methods)
-            or len(set(methods)) != len(methods)):
-        raise InputError(f"expected a non-empty list of distinct methods from "
-                         f"{', '.join(METHODS)}, got {methods!r}", path, "methods")
-
-    def positive(key: str, kind: Callable) -> Any:
-        if key not in data:
-            return None
-        value = kind(data[key], path, key)
-        if value <= 0:
-            raise InputError(f"expected a positive number, got {value!r}", path, key)
-        return value
-
-    paper = data.get("paper", {})
-    if not isinstance(paper, dict):
-        raise InputError("expected a table", path, "paper")
-    defaults = PaperOptions()
-    for key, value in paper.items():
-        if not hasattr(defaults, key):
-            raise InputError("unknown PaperOptions field", path, f"paper.{key}")
-        default = getattr(defaults, key)
-        ok = (isinstance(value, bool) if isinstance(default, bool)
-              else isinstance(value, int | float) and not isinstance(value, bool)
-              if isinstance(default, int | float) else isinstance(value, type(default)))
-        if not ok:
-            raise InputError(f"expected a value like {default!r}, got {value!r}", path,
-                             f"paper.{key}")
-    PaperOptions(**paper)  # its own range checks
-    protocol = path.parent / data["protocol"]
+    methods = check_methods(table.get("methods", list(METHODS)), path)
+    table.options("paper", PaperOptions)
+    protocol = path.parent / table.get("protocol")
     if not protocol.is_file():
         raise InputError(f"protocol file {protocol} not found", path, "protocol")
-    return StudyConfig(protocol, list(methods), positive("setups", as_int),
-                       positive("measurements", as_int), positive("duration_s", as_float),
-                       parse_graph_options(data.get("graph", {}), path), dict(paper), path)
+    declared = rules(StudyConfig)
+    return StudyConfig(protocol, list(methods),
+                       *(table.value(k, declared[k]) for k in ("setups", "measurements",
+                                                              "duration_s")),
+                       table.options("graph", GraphOptions), dict(table.get("paper", {})), path)
 
 
 # --- running ---------------------------------------------------------------------------------
@@ -209,7 +187,7 @@ def run_case(name: str, config: SimulationConfig, method: str, graph: GraphOptio
     tic = time.perf_counter()
     try:
         result = solve(capture.board, capture.angles, method, models,
-                       graph_options=dataclasses.replace(graph),
+                       graph_options=graph,
                        paper_options=PaperOptions(**paper))
     except LhgraphError as exc:
         return {**record, "error": str(exc), "seconds": time.perf_counter() - tic}
