@@ -21,9 +21,9 @@ from lhgraph.estimation.gravity import accel_dir_from_up
 from lhgraph.geometry.transforms import inverse, transform_points
 from lhgraph.model.calibration import StationCalibration
 from lhgraph.signal.capture import Capture, pulses_to_edges, write_capture
-from lhgraph.signal.sync import SYNC_BASE_S, SYNC_STEP_S
 from lhgraph.signal.ootx import OotxPayload, encode_frame, pack_payload
 from lhgraph.signal.pulses import LightPulses
+from lhgraph.signal.sync import SYNC_BASE_S, SYNC_STEP_S
 from lhgraph.sim.simulate import SimulatedCapture
 
 
