@@ -28,7 +28,7 @@ from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.gravity import to_gravity_world, up_vectors
 from lhgraph.geometry.transforms import inverse, rotation_angle
 from lhgraph.io.files import check_writable
-from lhgraph.signal.decode import decode_file
+from lhgraph.signal.formats import decode_file
 from lhgraph.signal.libsurvive import read_libsurvive_board, read_libsurvive_poses
 from lhgraph.workflow.inputs import models_of
 

@@ -22,10 +22,10 @@ from lhgraph.signal.capture import (
 from lhgraph.signal.decode import (
     DecodeOptions,
     decode_capture,
-    decode_file,
     decode_pulses,
     merge_carrier_gaps,
 )
+from lhgraph.signal.formats import decode_file
 from lhgraph.signal.pulses import LightPulses
 from lhgraph.sim.capture_sim import CaptureOptions, synthesize_capture
 from lhgraph.sim.simulate import default_simulation_config, simulate

@@ -22,7 +22,7 @@ from lhgraph.estimation.result import SolveResult
 from lhgraph.geometry.transforms import make_pose, so3_exp
 from lhgraph.io.stations import Station, Stations, load_stations
 from lhgraph.model.board import load_board
-from lhgraph.signal.decode import decode_file
+from lhgraph.signal.formats import decode_file
 from lhgraph.sim.capture_sim import default_calibrations
 from lhgraph.sim.simulate import load_simulation_config, simulate
 from lhgraph.workflow.inputs import models_of

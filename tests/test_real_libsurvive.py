@@ -9,7 +9,7 @@ import numpy as np
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.geometry.transforms import inverse, rotation_angle
 from lhgraph.model.board import load_board
-from lhgraph.signal.decode import decode_file
+from lhgraph.signal.formats import decode_file
 from lhgraph.signal.libsurvive import read_libsurvive_board, read_libsurvive_poses
 from lhgraph.workflow.inputs import models_of
 

@@ -265,6 +265,19 @@ def pulses_to_edges(pulses: LightPulses, length_samples: int,
     return Capture(idx, words, int(length_samples), int(sample_rate_hz), cmap)
 
 
+def changed_bits(capture: Capture) -> NDArray[np.uint32]:
+    """Per edge record, the port bits that changed there (the first record: its lit bits)."""
+    words = capture.port_word.astype(np.uint32)
+    return words ^ np.r_[np.uint32(0), words[:-1]]
+
+
+def toggles_per_channel(capture: Capture) -> NDArray[np.int64]:
+    """Number of edges (rising and falling) of each of the 32 port bits."""
+    changed = changed_bits(capture)
+    return np.array([np.count_nonzero(changed & np.uint32(1 << k)) for k in range(N_CHANNELS)],
+                    dtype=np.int64)
+
+
 def edges_to_pulses(capture: Capture) -> LightPulses:
     """Light pulses (per port bit, between a rising and the next falling edge) of a capture.
 
@@ -272,8 +285,7 @@ def edges_to_pulses(capture: Capture) -> LightPulses:
     capture ends at ``length_samples``; ``kind`` is -1 (unknown).
     """
     idx, words = capture.sample_index, capture.port_word.astype(np.uint32)
-    prev = np.r_[np.uint32(0), words[:-1]]
-    changed = (words ^ prev)
+    changed = changed_bits(capture)
     sensors, starts, ends = [], [], []
     for k in range(N_CHANNELS):
         if capture.channel_map[k] < 0:

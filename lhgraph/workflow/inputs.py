@@ -69,7 +69,7 @@ def load_inputs(config: SolveConfig) -> SolveInputs:
     notes: list[str] = []
     calibrations = load_calibration(config.calibration) if config.calibration else {}
     if config.capture is not None:
-        from lhgraph.signal.decode import decode_file
+        from lhgraph.signal.formats import decode_file
 
         decoded, warnings = decode_file(config.capture, board=board)
         angles = decoded.angles
