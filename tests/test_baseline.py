@@ -7,17 +7,18 @@ import numpy as np
 import pytest
 
 from lhgraph.errors import InputError, SolverError
-from lhgraph.estimation.baseline import (
+from lhgraph.estimation.baseline import PaperOptions, solve_paper
+from lhgraph.estimation.baseline.board_poses import (
     BoardPoses,
-    PaperOptions,
     estimate_board_pose,
     estimate_board_poses,
     initial_board_pose,
+    mirror_pose,
+)
+from lhgraph.estimation.baseline.station_pose import (
     initial_station_pose,
     interpolate_path,
-    mirror_pose,
     refine_station_pose,
-    solve_paper,
 )
 from lhgraph.estimation.reconstruct import Measurements, reconstruct_measurements
 from lhgraph.geometry.transforms import (

@@ -13,14 +13,9 @@ import numpy as np
 import pytest
 
 from lhgraph.errors import InputError
-from lhgraph.estimation.baseline import (
-    BoardPoses,
-    PaperOptions,
-    outliers,
-    refine_station_pose,
-    reject_outlier_poses,
-    solve_paper,
-)
+from lhgraph.estimation.baseline import PaperOptions, solve_paper
+from lhgraph.estimation.baseline.board_poses import BoardPoses, outliers, reject_outlier_poses
+from lhgraph.estimation.baseline.station_pose import refine_station_pose
 from lhgraph.estimation.reconstruct import Measurements
 from lhgraph.geometry.transforms import make_pose, rotation_angle, so3_exp, transform_points
 from lhgraph.io.angles import Angles
