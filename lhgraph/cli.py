@@ -100,13 +100,8 @@ def run_solve(args: argparse.Namespace) -> int:
 
     from lhgraph.config import override
     from lhgraph.errors import InputError
-    from lhgraph.report.text import print_solution
-    from lhgraph.workflow.rundir import (
-        comparison_rows,
-        format_comparison,
-        is_run_directory,
-        run_to_directory,
-    )
+    from lhgraph.report.text import format_comparison, print_solution
+    from lhgraph.workflow.rundir import comparison_rows, is_run_directory, run_to_directory
     from lhgraph.workflow.solve import solve_to_files
     from lhgraph.workflow.solve_config import SolveConfig, load_solve_config
 

@@ -12,7 +12,7 @@ import base64
 import html
 import io
 import json
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -21,9 +21,6 @@ from numpy.typing import NDArray
 from lhgraph.estimation.result import Residuals, SolveResult
 from lhgraph.io.angles import Angles
 from lhgraph.io.stations import Stations
-
-if TYPE_CHECKING:
-    from lhgraph.workflow.rundir import MethodRun
 
 ELLIPSOID_SCALE = 100.0
 AXIS_LENGTH_M = 0.3
@@ -237,15 +234,16 @@ def _errors_table(summary: dict) -> str:
                    "|gamma| deg", "|p| mm", "angle deg"], rows)
 
 
-def method_report(run: MethodRun, angles: Angles, truth: Stations | None) -> str:
-    """The HTML report of one method's run."""
-    s, result = run.summary, run.result
-    body = [f"<p>method <b>{html.escape(run.method)}</b>: {html.escape(result.status)} after "
+def method_report(method: str, result: SolveResult, summary: dict[str, Any], angles: Angles,
+                  truth: Stations | None) -> str:
+    """The HTML report of one method's run: its result and its ``summary.json`` document."""
+    s = summary
+    body = [f"<p>method <b>{html.escape(method)}</b>: {html.escape(result.status)} after "
             f"{result.iterations} iterations; {s['hits']} hits; created {s['created']}.</p>"]
     body += [f"<p class='warn'>warning: {html.escape(w)}</p>" for w in result.warnings]
     body += ["<h2>Stations</h2>", _stations_table(s), "<h2>Errors against the truth</h2>",
              _errors_table(s), "<h2>Scene</h2>",
-             png_tag(scene_figure({run.method: result}, truth), "scene")]
+             png_tag(scene_figure({method: result}, truth), "scene")]
     if result.residuals is not None:
         r = s["residuals"]
         rows = [[k, str(v["hits"]), _num(v["rms_urad"], ".1f"), _num(v["median_abs_urad"], ".1f"),
@@ -257,7 +255,7 @@ def method_report(run: MethodRun, angles: Angles, truth: Stations | None) -> str
                  png_tag(histogram_figure(result.residuals), "residual histograms"),
                  png_tag(angle_figure(result.residuals, angles), "residual vs angle"),
                  png_tag(sensor_figure(result.residuals), "residual per sensor")]
-    conv = convergence_figure({run.method: result.error_history})
+    conv = convergence_figure({method: result.error_history})
     if conv is not None:
         body += ["<h2>Convergence</h2>", png_tag(conv, "convergence")]
     details = {k: s[k] for k in ("inputs", "options", "seed", "versions")}
@@ -267,27 +265,30 @@ def method_report(run: MethodRun, angles: Angles, truth: Stations | None) -> str
              f"<pre>{html.escape(json.dumps(details, indent=2))}</pre>"]
     if s["decode"]:
         body += ["<h2>Decoder</h2>", f"<pre>{html.escape(chr(10).join(s['decode']))}</pre>"]
-    return _page(f"lhgraph run: {run.method}", body)
+    return _page(f"lhgraph run: {method}", body)
 
 
-def comparison_report(runs: list[MethodRun], truth: Stations | None) -> str:
-    """The HTML report comparing several methods' runs on the same input."""
-    from lhgraph.workflow.rundir import comparison_rows
+def comparison_report(results: dict[str, SolveResult], comparison: list[dict[str, Any]],
+                      truth: Stations | None) -> str:
+    """The HTML report comparing several methods' results on the same input.
 
+    ``comparison``: one row per (method, station) as in the comparison ``summary.json``
+    (``lhgraph.workflow.rundir.comparison_rows``).
+    """
     rows = [[r["method"], str(r["station"]), _num(r["position_norm_mm"], ".3f"),
              _num(r["rotation_deg"], ".4f"),
              ", ".join(f"{v:.3f}" for v in r["position_mm"]) if r["position_mm"] else "-",
              ", ".join(f"{v:.4f}" for v in r["euler_deg"]) if r["euler_deg"] else "-",
              _num(r["rms_urad"], ".1f"), _num(r["seconds"], ".2f")]
-            for r in comparison_rows(runs)]
+            for r in comparison]
     body = ["<h2>Comparison</h2>",
             _table(["method", "station", "|p| mm", "angle deg", "|X|,|Y|,|Z| mm",
                     "|alpha|,|beta|,|gamma| deg", "rms urad", "solve s"], rows),
             "<p>Per-method reports: " + ", ".join(
-                f"<a href='{r.method}/report.html'>{html.escape(r.method)}</a>" for r in runs)
+                f"<a href='{m}/report.html'>{html.escape(m)}</a>" for m in results)
             + "</p>", "<h2>Scene</h2>",
-            png_tag(scene_figure({r.method: r.result for r in runs}, truth), "scene")]
-    conv = convergence_figure({r.method: r.result.error_history for r in runs})
+            png_tag(scene_figure(results, truth), "scene")]
+    conv = convergence_figure({m: r.error_history for m, r in results.items()})
     if conv is not None:
         body += ["<h2>Convergence</h2>", png_tag(conv, "convergence")]
     return _page("lhgraph run: method comparison", body)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from lhgraph.estimation.result import SolveResult
@@ -53,3 +55,18 @@ def format_solution(result: SolveResult, errors: list[PoseError] | None = None) 
 def print_solution(result: SolveResult, errors: list[PoseError] | None = None) -> None:
     """Print :func:`format_solution` to stdout."""
     print(format_solution(result, errors))
+
+
+def format_comparison(rows: list[dict[str, Any]]) -> str:
+    """Plain-text table of the comparison rows (``lhgraph.workflow.rundir.comparison_rows``)."""
+    lines = [f"{'method':>7} {'station':>7} {'|p| mm':>9} {'angle deg':>9} {'rms urad':>9} "
+             f"{'time s':>7}"]
+
+    def num(v: float | None, fmt: str) -> str:
+        return format(v, fmt) if v is not None else format("-", fmt.split(".")[0] + "s")
+
+    for r in rows:
+        lines.append(f"{r['method']:>7} {r['station']:>7} {num(r['position_norm_mm'], '9.3f')} "
+                     f"{num(r['rotation_deg'], '9.4f')} {num(r['rms_urad'], '9.1f')} "
+                     f"{num(r['seconds'], '7.2f')}")
+    return "\n".join(lines)

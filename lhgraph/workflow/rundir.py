@@ -225,7 +225,7 @@ def run_to_directory(config: SolveConfig, output: str | Path, overwrite: bool = 
     Refuses (InputError, nothing written) when any target file exists and not ``overwrite``,
     or when ``output`` is an existing file.
     """
-    from lhgraph.report.html import comparison_report, method_report
+    from lhgraph.report.html import comparison_report, method_report  # matplotlib: slow
 
     output = Path(output)
     if output.exists() and not output.is_dir():
@@ -265,19 +265,21 @@ def run_to_directory(config: SolveConfig, output: str | Path, overwrite: bool = 
         run = MethodRun(method, result, errors, summary, folder)
         say(f"[{method}] writing the report")
         tic = time.perf_counter()
-        html = method_report(run, inputs.angles, truth)
+        html = method_report(method, result, summary, inputs.angles, truth)
         summary["timings_s"]["report"] = time.perf_counter() - tic
         files.append(_write_json(folder / "summary.json", summary, overwrite))
         files.append(write_atomic(folder / "report.html", html.encode(), overwrite))
         runs.append(run)
     report = output / "report.html"
     if len(methods) > 1:
+        rows = comparison_rows(runs)
         comparison = _json_safe({"methods": methods, "inputs": hashes, "seed": config.seed,
                                  "versions": versions(),
                                  "runs": {r.method: f"{r.method}/summary.json" for r in runs},
-                                 "comparison": comparison_rows(runs)})
+                                 "comparison": rows})
         files.append(_write_json(output / "summary.json", comparison, overwrite))
-        files.append(write_atomic(report, comparison_report(runs, truth).encode(), overwrite))
+        html = comparison_report({r.method: r.result for r in runs}, rows, truth)
+        files.append(write_atomic(report, html.encode(), overwrite))
     return RunDirectory(output, runs, report, files)
 
 
@@ -306,18 +308,3 @@ def comparison_rows(runs: list[MethodRun]) -> list[dict[str, Any]]:
                          "inlier_fraction": (s["residuals"] or {}).get("inlier_fraction"),
                          "seconds": solve_seconds(run.result)})
     return rows
-
-
-def format_comparison(rows: list[dict[str, Any]]) -> str:
-    """Plain-text table of :func:`comparison_rows`."""
-    lines = [f"{'method':>7} {'station':>7} {'|p| mm':>9} {'angle deg':>9} {'rms urad':>9} "
-             f"{'time s':>7}"]
-
-    def num(v: float | None, fmt: str) -> str:
-        return format(v, fmt) if v is not None else format("-", fmt.split(".")[0] + "s")
-
-    for r in rows:
-        lines.append(f"{r['method']:>7} {r['station']:>7} {num(r['position_norm_mm'], '9.3f')} "
-                     f"{num(r['rotation_deg'], '9.4f')} {num(r['rms_urad'], '9.1f')} "
-                     f"{num(r['seconds'], '7.2f')}")
-    return "\n".join(lines)
