@@ -35,7 +35,7 @@ Array = NDArray[np.float64]
 VARIANTS = ("full", "half", "merge")
 
 
-@dataclass
+@dataclass(frozen=True)
 class Measurements:
     """Reconstructed measurements of one station.
 
@@ -64,7 +64,7 @@ class Measurements:
                             self.elevation[keep], self.sensor_ids, self.source_axis[keep])
 
 
-@dataclass
+@dataclass(frozen=True)
 class _Sweeps:
     """The sweeps of one axis: ``time`` (K,) mean hit time; ``angle``, ``hit_time`` (K, S)."""
 

@@ -19,7 +19,7 @@ from lhgraph.io.files import as_int, as_vector, read_toml, station_tables, write
 from lhgraph.model.lh1 import CALIBRATION_KEYS, FactoryCalibration
 
 
-@dataclass
+@dataclass(frozen=True)
 class StationCalibration:
     """OOTX content of one station."""
 

@@ -21,7 +21,7 @@ from lhgraph.model.board import Board
 Array = NDArray[np.float64]
 
 
-@dataclass
+@dataclass(frozen=True)
 class BoardPoses:
     """Per-measurement board poses of one station, the station at the origin.
 

@@ -44,7 +44,7 @@ def hit_residuals(angles: Angles, board: Board, stations: Stations, trajectory: 
                      angles.sensor.copy(), angles.angle - pred, np.ones(len(angles)))
 
 
-@dataclass
+@dataclass(frozen=True)
 class _StationData:
     """One station: the measurements K2 uses (rejected fits removed), its board poses."""
 

@@ -86,7 +86,7 @@ def initial_station_pose(master: BoardPoses, slave: BoardPoses, board: Board,
     return weighted_kabsch(src, dst, w)
 
 
-@dataclass
+@dataclass(frozen=True)
 class Refinement:
     """Result of the K2 refinement of one station: pose, K2 (rad^2) over the measurements
     kept, K2 calls and iterations summed over the fits, convergence of the last fit, the

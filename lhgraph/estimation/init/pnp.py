@@ -30,7 +30,7 @@ _CANDIDATE_ITERATIONS = 4
 _P_CAM_LH = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 
 
-@dataclass
+@dataclass(frozen=True)
 class PnPResult:
     """Board poses ``T_lh_board`` (M, 4, 4), rms angle residual (rad) and sensors used."""
 

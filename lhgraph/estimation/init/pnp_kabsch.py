@@ -27,7 +27,7 @@ PoseSolver = Callable[..., PnPResult]
 normals, model) -> PnPResult`` (the signature of :func:`board_poses`)."""
 
 
-@dataclass
+@dataclass(frozen=True)
 class Initialisation:
     """Initial values: station poses ``L`` (S, 4, 4) (slot 0 = identity), board poses ``X``
     (K, 4, 4) and twists ``V`` (K, 6); ``overlap`` = time-matched pose pairs per station."""

@@ -46,7 +46,7 @@ MAX_ABS_ANGLE_RAD = 1.2
 MIN_SWEEP_GAP_PERIODS = 0.75
 
 
-@dataclass
+@dataclass(frozen=True)
 class HiveBag:
     """Everything lhgraph uses from a hive bag, on the ``t0`` time base (s).
 

@@ -26,7 +26,7 @@ Array = NDArray[np.float64]
 OUTPUT_FILES = ("angles.csv", "board.toml", "ootx.toml", "imu.csv", "mocap.csv")
 
 
-@dataclass
+@dataclass(frozen=True)
 class HiveImport:
     """What :func:`import_hive` wrote and a summary of the recording."""
 

@@ -31,7 +31,7 @@ def sweep_pairs(bag: HiveBag, max_gap_s: float = 0.015) -> list[tuple[int, int]]
     return [(int(sweeps[i]), int(sweeps[i + 1])) for i in np.flatnonzero(ok)]
 
 
-@dataclass
+@dataclass(frozen=True)
 class PairFit:
     """Single-station PnP fits of sweep pairs: ``station``, ``time`` (s, first sweep),
     ``T_lh_board`` (M, 4, 4), ``rms_rad`` over all hits of the pair and ``facing`` (fraction
@@ -73,7 +73,7 @@ def fit_sweep_pairs(bag: HiveBag, pairs: list[tuple[int, int]], mapping: AxisMap
     return out
 
 
-@dataclass
+@dataclass(frozen=True)
 class MappingCheck:
     """Per candidate mapping: median PnP rms (rad), mean facing fraction, median distance (m)
     and fraction of fits in front of the station."""

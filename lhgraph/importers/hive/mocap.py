@@ -16,7 +16,7 @@ from lhgraph.io.trajectory import Trajectory
 Array = NDArray[np.float64]
 
 
-@dataclass
+@dataclass(frozen=True)
 class MocapAlignment:
     """A board path aligned to OptiTrack: ``T_world_opti`` (world alignment), ``T_body_board``
     (hand-eye: marker body -> board frame), ``time_offset_s`` (mocap time = path time +
