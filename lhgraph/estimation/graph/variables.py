@@ -1,0 +1,165 @@
+"""The graph's variables: one :class:`VariableFamily` per kind of unknown (key symbol,
+dimension, meaning) and the :class:`VariableLayout` of one graph (which indices of each family
+it holds). Every read of a ``gtsam.Values`` or ``gtsam.VectorValues`` by family goes through the
+layout, vectorised (one GTSAM call per family, no per-key Python loop).
+
+Families (GTSAM key symbols are one character; these avoid GTSAM's IMU idiom, where ``v`` is a
+3-D velocity and ``b`` an IMU bias, so both stay free for IMU factors):
+
+==============  ======  ===  ============================================================
+family          symbol  dim  meaning
+==============  ======  ===  ============================================================
+board pose      ``x``   6    ``T_world_board`` at sweep k (``Pose3``)
+board twist     ``w``   6    body twist ``[omega, v]`` (rad/s, m/s, board frame) at sweep k
+sweep offset    ``o``   1    angle offset (rad) common to every diode of sweep k
+station pose    ``l``   6    ``T_world_lh`` of station slot s >= 1 (slot 0 is the world)
+==============  ======  ===  ============================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from lhgraph.estimation.init.pnp_kabsch import Initialisation
+
+Array = NDArray[np.float64]
+Elimination = Literal["leaf", "chain", "root"]
+
+
+@dataclass(frozen=True)
+class VariableFamily:
+    """One kind of variable.
+
+    ``symbol``: the GTSAM key character (key = ``gtsam.symbol(symbol, index)``); ``dim``: tangent
+    dimension; ``is_pose``: a ``Pose3`` (else a vector of ``dim``); ``elimination``: where its
+    variables go in the elimination order (``"leaf"``: first, each touches one state's factors
+    only; ``"chain"``: per board state, in time order; ``"root"``: last, shared by the whole
+    capture, so their marginals are read off the root clique); ``relinearize_threshold``: iSAM2
+    relinearises a variable whose step exceeds this (tangent units; 0.1 is GTSAM's default, 1.0
+    for variables the factors are nearly linear in)."""
+
+    name: str
+    symbol: str
+    dim: int
+    is_pose: bool
+    elimination: Elimination
+    relinearize_threshold: float
+    meaning: str
+
+    def key(self, index: int) -> int:
+        """GTSAM key of variable ``index`` of this family."""
+        return gtsam.symbol(self.symbol, index)
+
+
+BOARD_POSE = VariableFamily("board pose", "x", 6, True, "chain", 0.1,
+                            "T_world_board at sweep k")
+BOARD_TWIST = VariableFamily("board twist", "w", 6, False, "chain", 1.0,
+                             "body twist [omega, v] (rad/s, m/s, board frame) at sweep k")
+SWEEP_OFFSET = VariableFamily("sweep offset", "o", 1, False, "leaf", 1.0,
+                              "angle offset (rad) common to every diode of sweep k")
+STATION_POSE = VariableFamily("station pose", "l", 6, True, "root", 0.1,
+                              "T_world_lh of station slot s >= 1")
+FAMILIES = (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE)
+"""Every family the graph and the streaming smoother know."""
+
+
+class VariableLayout:
+    """The variables of one graph: for each family, the indices it holds (a ``range``; the
+    dict's order is the order the chain interleaves its families per state).
+
+    GTSAM orders a ``Values`` by key, i.e. by symbol character, then index; the layout turns
+    that order into per-family slices, so reading every pose back is one ``extractPose3``.
+    """
+
+    def __init__(self, indices: dict[VariableFamily, range]):
+        self._indices = dict(indices)
+        self._keys = {f: [f.key(i) for i in r] for f, r in self._indices.items()}
+        chain = [r for f, r in self._indices.items() if f.elimination == "chain"]
+        if any(r != chain[0] for r in chain):
+            raise ValueError("chain families must hold the same state indices")
+        self._pose_slices: dict[VariableFamily, slice] = {}
+        start = 0
+        for family in sorted((f for f in self._indices if f.is_pose), key=lambda f: f.symbol):
+            n = len(self._indices[family])
+            self._pose_slices[family] = slice(start, start + n)
+            start += n
+        self._n_poses = start
+
+    @classmethod
+    def of_problem(cls, n_states: int, n_stations: int) -> VariableLayout:
+        """The batch graph's layout: every family per board state ``0..n_states-1``, a station
+        pose for slots ``1..n_stations-1``."""
+        states = range(n_states)
+        return cls({BOARD_POSE: states, BOARD_TWIST: states, SWEEP_OFFSET: states,
+                    STATION_POSE: range(1, n_stations)})
+
+    @property
+    def families(self) -> tuple[VariableFamily, ...]:
+        return tuple(self._indices)
+
+    def indices(self, family: VariableFamily) -> range:
+        return self._indices[family]
+
+    def keys(self, family: VariableFamily) -> list[int]:
+        """Keys of ``family``, in index order."""
+        return self._keys[family]
+
+    def elimination_ordering(self) -> gtsam.Ordering:
+        """Leaf families first (the sweep offsets), then the chain families state by state in
+        time order (board pose, twist), the root families last (the stations): the chain
+        eliminates without fill-in, and the stations sit in the root clique, so their marginal
+        covariances come with the last iteration's Bayes tree for free."""
+        ordering = gtsam.Ordering()
+        by_stage = {stage: [f for f in self._indices if f.elimination == stage]
+                    for stage in ("leaf", "chain", "root")}
+        for family in by_stage["leaf"]:
+            for key in self._keys[family]:
+                ordering.push_back(key)
+        chain = [self._keys[f] for f in by_stage["chain"]]
+        for keys in zip(*chain, strict=True):
+            for key in keys:
+                ordering.push_back(key)
+        for family in by_stage["root"]:
+            for key in self._keys[family]:
+                ordering.push_back(key)
+        return ordering
+
+    def read_poses(self, values: gtsam.Values) -> dict[VariableFamily, Array]:
+        """Every pose family's poses ``(n, 4, 4)`` in index order (views of one array)."""
+        rows = gtsam.utilities.extractPose3(values)  # every Pose3 of values, in key order
+        if len(rows) != self._n_poses:
+            raise ValueError(f"values hold {len(rows)} poses, the layout {self._n_poses}")
+        T = np.zeros((len(rows), 4, 4))
+        T[:, :3, :3] = rows[:, :9].reshape(-1, 3, 3)
+        T[:, :3, 3] = rows[:, 9:]
+        T[:, 3, 3] = 1.0
+        return {family: T[s] for family, s in self._pose_slices.items()}
+
+    def read_vectors(self, values: gtsam.Values, family: VariableFamily) -> Array:
+        """A vector family's values ``(n, dim)`` in index order."""
+        return gtsam.utilities.extractVectors(values, family.symbol)
+
+    def read_steps(self, delta: gtsam.VectorValues, family: VariableFamily) -> Array:
+        """A family's tangent steps ``(n, dim)`` in index order."""
+        return delta.vector(self._keys[family]).reshape(-1, family.dim)
+
+    def insert(self, values: gtsam.Values, family: VariableFamily, data: Array) -> None:
+        """Insert ``data`` (``(n, 4, 4)`` poses or ``(n, dim)`` vectors, in index order)."""
+        for key, x in zip(self._keys[family], data, strict=True):
+            values.insert(key, gtsam.Pose3(x) if family.is_pose else x)
+
+
+def initial_values(layout: VariableLayout, init: Initialisation) -> gtsam.Values:
+    """GTSAM Values of an initialisation (sweep offsets zero)."""
+    values = gtsam.Values()
+    layout.insert(values, STATION_POSE, init.L[1:])
+    layout.insert(values, BOARD_POSE, init.X)
+    layout.insert(values, BOARD_TWIST, init.V)
+    layout.insert(values, SWEEP_OFFSET, np.zeros((len(init.X), 1)))
+    return values
