@@ -1,0 +1,240 @@
+"""Every factor of the batch graph evaluated in one vectorised numpy pass.
+
+:class:`FactorEvaluator` computes the residuals (and, on the first linearising callback, the
+Jacobians) of all bearing factors, sweep-offset priors and motion priors at once from
+:mod:`lhgraph.estimation.residuals`, caches them, and hands each GTSAM ``CustomFactor``
+callback its slice. It also gives the graph's cost in numpy (the number ``graph.error``
+returns, without a Python callback per factor) and holds the current noise levels, which the
+variance-component adaptation (:mod:`lhgraph.estimation.graph.noise`) rescales.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.estimation.graph.loss import RobustLoss
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.variables import (
+    BOARD_POSE,
+    BOARD_TWIST,
+    STATION_POSE,
+    SWEEP_OFFSET,
+    VariableLayout,
+)
+from lhgraph.estimation.problem import GraphProblem
+from lhgraph.estimation.residuals import bearing_residuals, motion_residuals, wnoa_covariance
+
+Array = NDArray[np.float64]
+FactorError = Callable[[gtsam.CustomFactor, gtsam.Values, list | None], Array]
+"""A ``gtsam.CustomFactor`` callback: ``(factor, values, jacobians or None) -> residual``."""
+
+
+def _read_only(a: Array) -> Array:
+    view = a.view()
+    view.flags.writeable = False
+    return view
+
+
+class FactorEvaluator:
+    """Vectorised residuals of every factor of ``problem``'s batch graph.
+
+    The residuals are recomputed only when a callback's variables differ from the cached
+    linearisation point. Noise: ``options.angle_sigma_rad`` per diode (robust ``loss``),
+    ``options.sweep_offset_sigma_rad`` per sweep offset, and the white-noise-on-acceleration
+    prior of PSDs ``options.accel_psd_rot`` / ``_pos``; :meth:`scale_bearing_noise` and
+    :meth:`scale_motion_prior` change the effective levels (the factors' noise models keep the
+    configured ones: the residuals and Jacobians are scaled instead).
+
+    Read API (at the last evaluated point; read-only arrays, valid until the next
+    evaluation): :meth:`bearing_residuals`, :meth:`whitened_bearing_residuals`,
+    :meth:`robust_weights`, :meth:`station_poses`, :meth:`board_poses`,
+    :meth:`board_twists`; noise levels: :meth:`angle_sigma`, :meth:`motion_psd`,
+    :meth:`motion_psd_factor`, :meth:`motion_chi2_per_dof`.
+    """
+
+    def __init__(self, problem: GraphProblem, layout: VariableLayout, loss: RobustLoss,
+                 options: GraphOptions):
+        self.problem = problem
+        self.layout = layout
+        self.loss = loss
+        self._sigma0 = options.angle_sigma_rad
+        self._offset_sigma = options.sweep_offset_sigma_rad
+        self._psd = (options.accel_psd_rot, options.accel_psd_pos)
+        K, S = problem.n_states, len(problem.station_ids)
+        self._X = np.full((K, 4, 4), np.nan)
+        self._W = np.full((K, 6), np.nan)
+        self._L = np.repeat(np.eye(4)[None], S, axis=0)
+        self._O = np.full(K, np.nan)
+        self._dt = np.diff(problem.state_time)
+        self._ones = np.ones((len(problem.hits.angle), 1))
+        self._values: gtsam.Values | None = None
+        self.motion_covariances = wnoa_covariance(self._dt, *self._psd)
+        """``(K - 1, 12, 12)`` covariance of each motion prior at the configured PSDs (the
+        factors' noise models)."""
+        self._Q_inv = np.linalg.inv(self.motion_covariances)
+        self._motion_scale = 1.0  # 1/sqrt(s): the motion prior's covariance is s * Q
+        self._bearing_scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
+        self._jacobians_ready = False
+
+    # --- noise levels --------------------------------------------------------------------
+
+    def scale_bearing_noise(self, factor: float) -> None:
+        """Multiply the diodes' angle variance by ``factor``."""
+        self._bearing_scale /= np.sqrt(factor)
+        self._scale_residuals()
+
+    def scale_motion_prior(self, factor: float) -> None:
+        """Multiply the motion prior's covariance by ``factor``."""
+        self._motion_scale /= np.sqrt(factor)
+        self._scale_residuals()
+
+    def angle_sigma(self) -> float:
+        """Effective per-diode angle noise (rad) now."""
+        return self._sigma0 / self._bearing_scale
+
+    def motion_psd_factor(self) -> float:
+        """Effective motion-prior PSDs over the configured ones."""
+        return self._motion_scale ** -2
+
+    def motion_psd(self) -> tuple[float, float]:
+        """Effective (rotational, linear) acceleration PSD of the motion prior now."""
+        s = self._motion_scale ** -2
+        return self._psd[0] * s, self._psd[1] * s
+
+    def motion_chi2_per_dof(self) -> float:
+        """Mean whitened squared motion-prior residual per degree of freedom under the current
+        prior (1 if its strength matches the solved motion)."""
+        return float(np.mean(self._motion_chi2()) / 12)
+
+    # --- evaluation and read API ---------------------------------------------------------
+
+    def evaluate(self, values: gtsam.Values) -> None:
+        """Make ``values`` the evaluated point (recomputed unless it is the cached one)."""
+        if values is not self._values:
+            self._read(values)
+
+    def cost(self, values: gtsam.Values) -> float:
+        """The graph's error at ``values`` (what ``graph.error`` returns): robust loss of the
+        whitened diode residuals, plus half the squared whitened offset priors and motion
+        priors."""
+        self.evaluate(values)
+        bearing = self.loss.cost(self._r_whitened / self._sigma0)
+        offsets = 0.5 * (self._O / self._offset_sigma) ** 2
+        return float(bearing.sum() + offsets.sum() + 0.5 * self._motion_chi2().sum())
+
+    def bearing_residuals(self) -> Array:
+        """Per-hit angle residual, predicted (+ sweep offset) - measured (rad), in the
+        problem's hit order."""
+        return _read_only(self._r)
+
+    def whitened_bearing_residuals(self) -> Array:
+        """Per-hit residuals in units of the current diode noise (sigmas)."""
+        return self._r_whitened / self._sigma0
+
+    def robust_weights(self) -> Array:
+        """Per-hit robust weight in [0, 1] at the current diode noise."""
+        return self.loss.weights(self._r, self.angle_sigma())
+
+    def station_poses(self) -> Array:
+        """``T_world_lh`` of every station slot ``(S, 4, 4)`` (slot 0, the world: identity)."""
+        return _read_only(self._L)
+
+    def board_poses(self) -> Array:
+        """``T_world_board`` of every board state ``(K, 4, 4)``."""
+        return _read_only(self._X)
+
+    def board_twists(self) -> Array:
+        """Body twist ``[omega, v]`` of every board state ``(K, 6)``."""
+        return _read_only(self._W)
+
+    # --- GTSAM callbacks -------------------------------------------------------------------
+
+    def bearing_error(self, k: int, slot: int) -> FactorError:
+        """Callback of sweep k's bearing factor (station ``slot``; keys as in
+        :func:`lhgraph.estimation.graph.factors.bearing_keys`)."""
+        a, b = self.problem.bounds[k], self.problem.bounds[k + 1]
+        station_var = slot if slot > 0 else None
+
+        def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
+            self._ensure(values, k, station_var)
+            if H is not None:
+                self._jacobians()
+                H[0] = self._HX[a:b]
+                H[1] = self._HW[a:b]
+                H[2] = self._offset_jacobian[a:b]
+                if station_var is not None:
+                    H[3] = self._HL[a:b]
+            return self._r_whitened[a:b]
+
+        return error
+
+    def motion_error(self, k: int) -> FactorError:
+        """Callback of the motion prior between states k and k + 1."""
+        def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
+            self._ensure(values, k, None)
+            self._ensure(values, k + 1, None)
+            if H is not None:
+                self._jacobians()
+                for j in range(4):
+                    H[j] = self._He[j][k]
+            return self._e[k]
+
+        return error
+
+    # --- internals ------------------------------------------------------------------------
+
+    def _scale_residuals(self) -> None:
+        self._r_whitened = self._r * self._bearing_scale
+        self._e = self._e_raw * self._motion_scale
+        self._jacobians_ready = False
+
+    def _motion_chi2(self) -> Array:
+        """Whitened squared residual ``e^T Q^-1 e`` of every motion prior (K-1,)."""
+        return np.einsum("ki,kij,kj->k", self._e, self._Q_inv, self._e)
+
+    def _read(self, values: gtsam.Values) -> None:
+        poses = self.layout.read_poses(values)
+        self._L[1:] = poses[STATION_POSE]
+        self._X = poses[BOARD_POSE]
+        self._W = self.layout.read_vectors(values, BOARD_TWIST)
+        self._O = self.layout.read_vectors(values, SWEEP_OFFSET)[:, 0]
+        p = self.problem
+        h = p.hits
+        self._r = bearing_residuals(h, self._X, self._W, self._L, p.models, False)[0]
+        self._r += self._O[h.state]
+        self._e_raw = motion_residuals(self._X[:-1], self._W[:-1], self._X[1:], self._W[1:],
+                                       self._dt, False)[0]
+        self._scale_residuals()
+        self._values = values
+
+    def _jacobians(self) -> None:
+        """Jacobians at the cached point, computed once, on the first linearising callback
+        (error-only evaluations never need them)."""
+        if self._jacobians_ready:
+            return
+        _, HX, HW, HL = bearing_residuals(self.problem.hits, self._X, self._W, self._L,
+                                          self.problem.models)
+        self._HX, self._HW, self._HL = (H * self._bearing_scale for H in (HX, HW, HL))
+        self._offset_jacobian = self._ones * self._bearing_scale
+        _, He = motion_residuals(self._X[:-1], self._W[:-1], self._X[1:], self._W[1:],
+                                 self._dt)
+        self._He = tuple(H * self._motion_scale for H in He)
+        self._jacobians_ready = True
+
+    def _ensure(self, values: gtsam.Values, k: int, slot: int | None) -> None:
+        # A Python-owned Values reaches every callback as the same object: identity is
+        # enough. Values copied by GTSAM's optimisers are compared by content.
+        if values is self._values:
+            return
+        if (np.array_equal(values.atPose3(BOARD_POSE.key(k)).matrix(), self._X[k])
+                and np.array_equal(values.atVector(BOARD_TWIST.key(k)), self._W[k])
+                and values.atVector(SWEEP_OFFSET.key(k))[0] == self._O[k]
+                and (slot is None or np.array_equal(
+                    values.atPose3(STATION_POSE.key(slot)).matrix(), self._L[slot]))):
+            self._values = values
+            return
+        self._read(values)

@@ -1,0 +1,90 @@
+"""The graph's factors, built in one place for the batch solve and the streaming smoother.
+
+1. **Bearing factor**, one per sweep k, keys :func:`bearing_keys` (board pose, twist and sweep
+   offset of state k, and the station's pose unless it is the reference): one row per diode
+   hit in that sweep, residual = predicted angle of the full station model + sweep offset -
+   measured, isotropic diode noise wrapped in the per-diode robust loss
+   (:mod:`lhgraph.estimation.graph.loss`);
+2. **sweep-offset prior** on every offset (GTSAM's ``PriorFactorVector``, zero mean);
+3. **motion prior** (white noise on acceleration) between consecutive states, keys
+   :func:`motion_keys`.
+
+The residuals come from :mod:`lhgraph.estimation.residuals`; who evaluates them is the
+caller's choice (the batch graph's vectorised :class:`FactorEvaluator`, the streaming
+smoother's per-sweep callbacks), passed in as the factor's callback.
+"""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.estimation.graph.evaluator import FactorError, FactorEvaluator
+from lhgraph.estimation.graph.loss import RobustLoss
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.variables import (
+    BOARD_POSE,
+    BOARD_TWIST,
+    STATION_POSE,
+    SWEEP_OFFSET,
+    VariableLayout,
+)
+from lhgraph.estimation.problem import GraphProblem
+
+Array = NDArray[np.float64]
+
+
+def bearing_keys(k: int, slot: int) -> list[int]:
+    """Keys of sweep k's bearing factor seen by station ``slot`` (slot 0 is no variable)."""
+    keys = [BOARD_POSE.key(k), BOARD_TWIST.key(k), SWEEP_OFFSET.key(k)]
+    return keys + [STATION_POSE.key(slot)] if slot > 0 else keys
+
+
+def motion_keys(k: int) -> list[int]:
+    """Keys of the motion prior between states k and k + 1."""
+    return [BOARD_POSE.key(k), BOARD_TWIST.key(k), BOARD_POSE.key(k + 1), BOARD_TWIST.key(k + 1)]
+
+
+class FactorBuilder:
+    """Makes the graph's factors with one robust loss and sweep-offset noise."""
+
+    def __init__(self, loss: RobustLoss, sweep_offset_sigma_rad: float):
+        self._estimator = loss.estimator()
+        self._offset_noise = gtsam.noiseModel.Isotropic.Sigma(1, sweep_offset_sigma_rad)
+
+    def bearing(self, k: int, slot: int, n_hits: int, angle_sigma_rad: float,
+                error: FactorError) -> gtsam.CustomFactor:
+        """Sweep k's bearing factor: ``n_hits`` diodes of noise ``angle_sigma_rad``, robust."""
+        noise = gtsam.noiseModel.Robust.Create(
+            self._estimator, gtsam.noiseModel.Isotropic.Sigma(n_hits, angle_sigma_rad))
+        return gtsam.CustomFactor(noise, bearing_keys(k, slot), error)
+
+    def offset_prior(self, k: int) -> gtsam.PriorFactorVector:
+        """The zero-mean prior on sweep k's offset."""
+        return gtsam.PriorFactorVector(SWEEP_OFFSET.key(k), np.zeros(1), self._offset_noise)
+
+    def motion(self, k: int, covariance: Array, error: FactorError) -> gtsam.CustomFactor:
+        """The motion prior between states k and k + 1 of ``covariance`` (12, 12)."""
+        return gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(covariance),
+                                  motion_keys(k), error)
+
+
+def build_graph(problem: GraphProblem, options: GraphOptions
+                ) -> tuple[gtsam.NonlinearFactorGraph, FactorEvaluator]:
+    """The nonlinear factor graph of ``problem`` (one bearing factor per sweep, the offset
+    priors, the motion priors) and the evaluator its callbacks slice."""
+    loss = RobustLoss(options.loss, options.huber_k)
+    layout = VariableLayout.of_problem(problem.n_states, len(problem.station_ids))
+    ev = FactorEvaluator(problem, layout, loss, options)
+    build = FactorBuilder(loss, options.sweep_offset_sigma_rad)
+    graph = gtsam.NonlinearFactorGraph()
+    for k in range(problem.n_states):
+        n = int(problem.bounds[k + 1] - problem.bounds[k])
+        slot = int(problem.state_station[k])
+        graph.add(build.bearing(k, slot, n, options.angle_sigma_rad, ev.bearing_error(k, slot)))
+    for k in range(problem.n_states):
+        graph.add(build.offset_prior(k))
+    for k in range(problem.n_states - 1):
+        graph.add(build.motion(k, ev.motion_covariances[k], ev.motion_error(k)))
+    return graph, ev
