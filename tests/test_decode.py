@@ -259,3 +259,51 @@ def test_sync_flashes_off_the_grid_decode_to_nothing():
     report = result.report
     assert (report.sync_flashes + report.dropped.get("sync flashes off the slot grid", 0)
             + report.dropped.get("duplicate sync flashes in one slot", 0)) == 5
+
+
+def test_no_lighthouse_signal_is_one_line_exit_2_and_bounded(tmp_path, capsys):
+    import tracemalloc
+
+    from lhgraph.errors import InputError
+
+    noise = tmp_path / "noise.bin"
+    noise.write_bytes(np.random.default_rng(0).integers(0, 256, 5_000_000, np.uint8).tobytes())
+    zeros = tmp_path / "zeros.dat"
+    zeros.write_bytes(bytes(400_000))
+    for path, extra in ((noise, []), (zeros, ["--format", "raw"])):
+        out = tmp_path / f"out-{path.stem}"
+        capsys.readouterr()
+        assert main(["decode", str(path), "--output", str(out), *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"{path}: no Lighthouse signal found" in err[0]
+        assert not out.exists()
+    tracemalloc.start()
+    try:
+        with pytest.raises(InputError, match="no Lighthouse signal"):
+            decode_file(noise)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 150e6  # was 1.4 GB: every random bit became pulses
+
+
+def test_quiet_decode_still_reports_dropped_records(sim, tmp_path, capsys):
+    cap = synthesize_capture(sim, _sim_cals(sim), np.random.default_rng(9))
+    data = encode_capture(cap)
+    path = tmp_path / "cut.lhcap"
+    path.write_bytes(data[: len(data) // 2])
+    capsys.readouterr()
+    assert main(["decode", str(path), "--output", str(tmp_path / "out"), "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert "truncated" in captured.err and "edge records present" in captured.err
+    assert "sweep hits" not in captured.err  # the decoder's summary stays quiet
+
+
+def test_decode_output_under_a_file_is_refused_before_decoding(sim, tmp_path, capsys):
+    cap = synthesize_capture(sim, _sim_cals(sim), np.random.default_rng(10))
+    path = write_capture(cap, tmp_path / "c.lhcap")
+    capsys.readouterr()
+    assert main(["decode", str(path), "--output", str(path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "c.lhcap: is not a directory" in err[0]

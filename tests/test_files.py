@@ -158,3 +158,77 @@ def test_cli_bad_input_is_one_line_exit_2(tmp_path):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "a.csv:2" in lines[0] and "Traceback" not in proc.stderr
     assert not (tmp_path / "out.toml").exists()
+
+
+def test_angles_csv_with_byte_order_mark(tmp_path):
+    path = tmp_path / "bom.csv"
+    path.write_bytes(b"\xef\xbb\xbf" + (HEADER + "0.1,0,0,3,0.2\n0.2,1,1,4,-0.3\n").encode())
+    a = load_angles(path)
+    np.testing.assert_array_equal(a.sensor, [3, 4])
+    assert a.extra == {}
+
+
+def test_duplicate_hits_are_refused_with_their_line(tmp_path):
+    rows = "0.1,0,0,3,0.2\n0.1,0,0,4,0.2\n0.1,0,0,3,0.2\n0.2,0,0,3,0.25\n0.2,0,0,3,0.25\n"
+    path = _write(tmp_path, "dup.csv", HEADER + rows)
+    with pytest.raises(InputError, match=r"dup\.csv:4: repeats an earlier row.*2 such rows"):
+        load_angles(path)
+    # same time and sensor but another angle is not a duplicate row
+    load_angles(_write(tmp_path, "ok.csv", HEADER + "0.1,0,0,3,0.2\n0.1,0,0,3,0.21\n"))
+
+
+def test_atomic_writer_refuses_and_leaves_nothing(tmp_path, monkeypatch):
+    from lhgraph.io.files import check_writable, write_atomic
+
+    target = write_atomic(tmp_path / "sub" / "a.txt", b"one")  # creates the directory
+    assert target.read_bytes() == b"one"
+    with pytest.raises(InputError, match="exists already"):
+        write_atomic(target, b"two")
+    assert write_atomic(target, b"two", overwrite=True).read_bytes() == b"two"
+    with pytest.raises(InputError, match="is a directory"):
+        write_atomic(tmp_path / "sub", b"x", overwrite=True)
+    with pytest.raises(InputError, match=r"a\.txt: is not a directory"):
+        write_atomic(target / "under" / "b.txt", b"x")
+    with pytest.raises(InputError, match="is not a directory"):
+        check_writable(target / "b.txt", False, create_parents=False)
+    check_writable(tmp_path / "new" / "c.txt", False, create_parents=False)
+    assert not (tmp_path / "new").exists()
+
+    def broken_fsync(fd: int) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr("os.fsync", broken_fsync)
+    with pytest.raises(InputError, match="c.txt: cannot write: No space left"):
+        write_atomic(tmp_path / "sub" / "c.txt", b"x")
+    assert sorted(p.name for p in (tmp_path / "sub").iterdir()) == ["a.txt"]
+
+
+def test_read_only_directory_is_refused(tmp_path):
+    import os
+
+    from lhgraph.io.files import write_atomic
+
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        if os.access(locked, os.W_OK):
+            pytest.skip("this user may write into read-only directories (root)")
+        with pytest.raises(InputError, match="locked: directory is not writable"):
+            write_atomic(locked / "a.txt", b"x")
+    finally:
+        locked.chmod(0o755)
+
+
+def test_cli_output_under_a_file_is_one_line_exit_2(tmp_path):
+    angles = _write(tmp_path, "a.csv", HEADER + "0.1,0,0,3,0.1\n")
+    board = _write(tmp_path, "b.toml", "[[sensors]]\nid = 3\nposition = [0, 0, 0]\n"
+                   "normal = [0, 0, 1]\n")
+    proc = subprocess.run(
+        [sys.executable, "-m", "lhgraph", "solve", "--board", str(board), "--angles",
+         str(angles), "--output", str(angles / "out.toml")],
+        capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "a.csv: is not a directory" in lines[0]
+    assert "Traceback" not in proc.stderr

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
-from lhgraph.io.files import read_csv_columns, write_csv_columns
+from lhgraph.io.files import CSV_ENCODING, read_csv_columns, write_csv_columns
 from lhgraph.model.board import Board
 
 SWEEP_GAP_S = 4e-3
@@ -92,7 +92,30 @@ def validate(a: Angles, source: str | Path | None = None) -> Angles:
         fail(bad, f"angle {a.angle[bad][0]:.6g} rad is outside [-pi, pi]")
     if len(a) > 1 and np.any(back := np.diff(a.time) < 0):
         fail(np.r_[False, back], "time goes backwards")
+    repeats = duplicate_rows(a)
+    if len(repeats):
+        first = int(repeats[0])
+        raise InputError(f"repeats an earlier row exactly: a hit counted twice ({len(repeats)} "
+                         "such rows in the file; remove them)", source, str(first + 2))
     return a
+
+
+def duplicate_rows(a: Angles) -> NDArray[np.int64]:
+    """Rows (sorted indices) identical in every column to an earlier row; ``a`` sorted by
+    time, so only rows sharing a time are compared."""
+    if len(a) < 2:
+        return np.zeros(0, np.int64)
+    tied = np.flatnonzero(np.diff(a.time) == 0)
+    rows = np.unique(np.r_[tied, tied + 1])
+    if len(rows) == 0:
+        return rows.astype(np.int64)
+    columns = [a.time, a.lighthouse, a.axis, a.sensor, a.angle, *a.extra.values()]
+    keys = [np.asarray(c)[rows] for c in columns]
+    order = np.lexsort((rows, *keys[::-1]))  # equal rows together, earliest first
+    same = np.ones(len(rows) - 1, bool)
+    for k in keys:
+        same &= k[order][1:] == k[order][:-1]
+    return np.sort(rows[order][1:][same]).astype(np.int64)
 
 
 def load_angles(path: str | Path) -> Angles:
@@ -107,8 +130,11 @@ def load_angles(path: str | Path) -> Angles:
 
 
 def _extra_names(path: str | Path) -> list[str]:
-    with Path(path).open() as f:
-        header = [h.strip() for h in f.readline().split(",")]
+    try:
+        with Path(path).open(encoding=CSV_ENCODING) as f:
+            header = [h.strip() for h in f.readline().split(",")]
+    except (OSError, UnicodeDecodeError):
+        return []  # read_csv_columns says what is wrong with the file
     return [h for h in header if h not in dict(COLUMNS)]
 
 

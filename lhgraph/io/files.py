@@ -23,6 +23,10 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 
+CSV_ENCODING = "utf-8-sig"
+"""CSV files are UTF-8; a leading byte-order mark (as some spreadsheet programs write) is
+skipped."""
+
 
 def read_toml(path: str | Path) -> dict[str, Any]:
     """Parse a TOML file; missing or malformed files raise InputError."""
@@ -197,7 +201,7 @@ def read_csv_columns(
     """
     path = Path(path)
     try:
-        f = path.open(newline="")
+        f = path.open(newline="", encoding=CSV_ENCODING)
     except FileNotFoundError:
         raise InputError("file not found", path) from None
     except IsADirectoryError:
@@ -230,7 +234,7 @@ def read_csv_columns(
                for j, name in wanted):
             return {name: fast[:, j].astype(np.int64) if types.get(name, float) is int
                     else fast[:, j] for j, name in wanted}
-        f = path.open(newline="")
+        f = path.open(newline="", encoding=CSV_ENCODING)
         with f:
             rows = list(csv.reader(f))[1:]
     out: dict[str, NDArray] = {}

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.geometry.transforms import transform_points
+from lhgraph.io.files import check_writable, write_atomic
 from lhgraph.io.stations import load_stations
 from lhgraph.io.trajectory import load_trajectory
 from lhgraph.model.board import Board, load_board
@@ -166,8 +167,11 @@ def _bounds(scene: Scene) -> tuple[NDArray, NDArray]:
     return pts.min(axis=0), pts.max(axis=0)
 
 
-def png_matplotlib(scene: Scene, path: str | Path) -> Path:
-    """Render the scene's segments and points with matplotlib (no display, no GPU)."""
+def png_matplotlib(scene: Scene, path: str | Path, overwrite: bool = False) -> Path:
+    """Render the scene's segments and points with matplotlib (no display, no GPU) into a
+    PNG file (written atomically; an existing file only replaced when ``overwrite``)."""
+    import io
+
     from matplotlib.figure import Figure
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
@@ -185,8 +189,9 @@ def png_matplotlib(scene: Scene, path: str | Path) -> Path:
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
-    fig.savefig(path, dpi=100, bbox_inches="tight")
-    return Path(path)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+    return write_atomic(path, buf.getvalue(), overwrite)
 
 
 def export(scene: Scene, path: str | Path, overwrite: bool = False,
@@ -194,8 +199,6 @@ def export(scene: Scene, path: str | Path, overwrite: bool = False,
     """Write the scene without a display: a mesh (``.ply``/``.glb``/``.gltf``/``.obj``) or
     a ``.png``. ``renderer`` for PNGs: ``"open3d"``, ``"matplotlib"`` or ``"auto"`` (Open3D's
     offscreen renderer, falling back to matplotlib). Returns the path and what wrote it."""
-    from lhgraph.io.files import check_writable
-
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (*MESH_FORMATS, ".png"):
@@ -207,7 +210,7 @@ def export(scene: Scene, path: str | Path, overwrite: bool = False,
             return path, "open3d"
         if renderer == "open3d":
             raise InputError("Open3D's offscreen renderer cannot run here (no EGL/GPU)", path)
-        return png_matplotlib(scene, path), "matplotlib"
+        return png_matplotlib(scene, path, overwrite), "matplotlib"
     import open3d as o3d
 
     if not o3d.io.write_triangle_mesh(str(path), to_open3d(scene)):
