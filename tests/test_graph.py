@@ -8,21 +8,30 @@ from pathlib import Path
 import gtsam
 import numpy as np
 import pytest
-from gtsam.symbol_shorthand import L, X
 
 from lhgraph.errors import SolverError
-from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.solver import (
-    _board_steps,
-    _levenberg_marquardt,
-    _optimise,
-    _remaining_sigmas,
-    build_graph,
-    elimination_ordering,
-    initial_values,
-    solve_graph,
+from lhgraph.estimation.graph.factors import build_graph
+from lhgraph.estimation.graph.loss import RobustLoss
+from lhgraph.estimation.graph.noise import NoiseAdaptation
+from lhgraph.estimation.graph.optimizer import (
+    LMParams,
+    Status,
+    largest_board_step,
+    levenberg_marquardt,
+    remaining_sigmas,
 )
-from lhgraph.estimation.init.pnp_kabsch import consistent_path, initialise
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.graph.variables import (
+    BOARD_POSE,
+    BOARD_TWIST,
+    STATION_POSE,
+    SWEEP_OFFSET,
+    VariableFamily,
+    VariableLayout,
+    initial_values,
+)
+from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser, consistent_path
 from lhgraph.estimation.problem import build_problem
 from lhgraph.geometry.transforms import inverse, make_pose, se3_exp, se3_log, so3_exp
 from lhgraph.io.angles import Angles
@@ -188,6 +197,14 @@ def test_simultaneous_sweeps_of_two_stations_still_solve():
     assert result.residuals.inlier_fraction() > 0.5
 
 
+def _graph(sim, options):
+    """Problem, graph, evaluator and initial values of a capture (reference station 0)."""
+    problem = build_problem(sim.board, sim.angles, {}, 0)
+    graph, ev = build_graph(problem, options)
+    init = PnPKabschInitialiser()(sim.board, sim.angles, problem)
+    return problem, graph, ev, initial_values(ev.layout, init)
+
+
 @pytest.mark.parametrize("loss", ["cauchy", "huber"])
 def test_numpy_cost_is_the_graph_error(loss):
     """The LM's numpy cost equals GTSAM's ``graph.error`` (robust per-diode loss, offset and
@@ -195,14 +212,26 @@ def test_numpy_cost_is_the_graph_error(loss):
     robust branch of the loss is exercised."""
     sim = _capture("default", duration_s=1.0, reflection_fraction=0.03)
     options = GraphOptions(loss=loss)
-    problem = build_problem(sim.board, sim.angles, {}, 0)
-    graph, ev = build_graph(problem, options)
-    values = initial_values(initialise(sim.board, sim.angles, problem))
+    _, graph, ev, values = _graph(sim, options)
     assert ev.cost(values) == pytest.approx(graph.error(values), rel=1e-12)
     ev.scale_motion_prior(0.3)
     ev.scale_bearing_noise(2.0)
     assert ev.cost(values) == pytest.approx(graph.error(values), rel=1e-12)
-    assert np.abs(ev.r_whitened / options.angle_sigma_rad).max() > 3 * options.huber_k
+    assert np.abs(ev.whitened_bearing_residuals()).max() > 3 * options.huber_k
+
+
+@pytest.mark.parametrize("kind", ["cauchy", "huber"])
+def test_robust_loss_is_gtsams_estimator(kind):
+    """The numpy loss and weights are those of the m-estimator the factors use."""
+    loss = RobustLoss(kind, 3.0)
+    estimator = loss.estimator()
+    x = np.array([0.0, 0.5, -2.9, 3.0, 4.0, -30.0])
+    np.testing.assert_allclose(loss.cost(x), [estimator.loss(v) for v in x], rtol=1e-14)
+    sigma = 1e-4
+    np.testing.assert_allclose(loss.weights(x[1:] * sigma, sigma),
+                               [estimator.weight(v) for v in x[1:]], rtol=1e-14)
+    with pytest.raises(SolverError, match="unknown loss"):
+        RobustLoss("tukey", 3.0)
 
 
 def test_covariance_from_the_last_iteration_matches_marginals_at_the_result():
@@ -211,13 +240,15 @@ def test_covariance_from_the_last_iteration_matches_marginals_at_the_result():
     solution."""
     sim = _capture("default", duration_s=2.0)
     options = GraphOptions()
-    problem = build_problem(sim.board, sim.angles, {}, 0)
-    graph, ev = build_graph(problem, options)
-    values = initial_values(initialise(sim.board, sim.angles, problem))
-    fit = _levenberg_marquardt(graph, values, ev, elimination_ordering(problem), options, None)
-    assert fit.converged and fit.tree is not None
-    fresh = gtsam.Marginals(graph.linearize(fit.values), fit.values).marginalCovariance(L(1))
-    np.testing.assert_allclose(fit.tree.marginalCovariance(L(1)), fresh, rtol=1e-3,
+    _, graph, ev, values = _graph(sim, options)
+    fit = levenberg_marquardt(graph, values, ev.cost, ev.layout, LMParams.from_options(options),
+                              NoiseAdaptation(ev, options))
+    assert fit.status == Status.CONVERGED and fit.covariance_from_last_iteration
+    assert len(fit.error_history) == fit.iterations + 1
+    assert fit.final_error == fit.error_history[-1] == pytest.approx(graph.error(fit.values))
+    key = STATION_POSE.key(1)
+    fresh = gtsam.Marginals(graph.linearize(fit.values), fit.values).marginalCovariance(key)
+    np.testing.assert_allclose(fit.covariance(key), fresh, rtol=1e-3,
                                atol=1e-3 * np.abs(fresh).max())
 
 
@@ -227,19 +258,19 @@ def test_noise_levels_follow_the_solution_after_a_bad_start(name, seed):
     large; the levels keep adapting, so the learned diode sigma ends at the residuals' robust
     spread (or the floor), not frozen at a transient value, and the station is found."""
     sim = _capture(name, seed=seed)
-    options = GraphOptions()
-    problem = build_problem(sim.board, sim.angles, _models(sim), 0)
-    graph, ev = build_graph(problem, options)
-    init = initialise(sim.board, sim.angles, problem)
-    init.L[1] = init.L[1] @ se3_exp(np.array([1.0, 0.0, 0.0, 1.5, 0.0, 0.0]))
-    result, cov, _, _, converged = _optimise(graph, initial_values(init), problem, ev, options,
-                                             None)
-    assert converged
-    ev.at(result)
-    spread = max(1.4826 * np.median(np.abs(ev.r)), options.angle_sigma_rad)
-    assert spread <= ev.angle_sigma() < 1.25 * spread
+
+    def bad_start(board, angles, problem):
+        init = PnPKabschInitialiser()(board, angles, problem)
+        init.L[1] = init.L[1] @ se3_exp(np.array([1.0, 0.0, 0.0, 1.5, 0.0, 0.0]))
+        return init
+
+    result = solve_graph(sim.board, sim.angles, _models(sim), initialiser=bad_start)
+    assert result.status == "converged"
+    spread = max(1.4826 * np.median(np.abs(result.residuals.residual_rad)),
+                 GraphOptions().angle_sigma_rad)
+    assert spread <= result.diagnostics["angle_sigma_rad"] < 1.25 * spread
     truth = sim.truth.stations[1].T_world_lh
-    assert np.linalg.norm(ev.L[1][:3, 3] - truth[:3, 3]) < 3e-3
+    assert np.linalg.norm(result.stations.pose(1)[:3, 3] - truth[:3, 3]) < 3e-3
 
 
 @pytest.mark.parametrize(("name", "seed"), [("default", 1), ("default", 2), ("facing", 1),
@@ -259,21 +290,48 @@ def test_early_stop_is_close_to_full_convergence(name, seed):
 def test_remaining_distance_sums_the_geometric_tail():
     """Steps shrinking at rate rho leave step * rho / (1 - rho) to go; without a previous
     step, or when the steps grow, the step itself counts."""
-    assert _remaining_sigmas(0.1, 1.0) == pytest.approx(0.1 * 0.1 / 0.9)
-    assert _remaining_sigmas(0.4, 0.5) == pytest.approx(1.6)
-    assert _remaining_sigmas(0.3, None) == 0.3
-    assert _remaining_sigmas(0.3, 0.2) == 0.3
+    assert remaining_sigmas(0.1, 1.0) == pytest.approx(0.1 * 0.1 / 0.9)
+    assert remaining_sigmas(0.4, 0.5) == pytest.approx(1.6)
+    assert remaining_sigmas(0.3, None) == 0.3
+    assert remaining_sigmas(0.3, 0.2) == 0.3
 
 
-def test_board_steps_are_read_from_the_board_poses():
-    """``_board_steps`` takes the board poses' part of a step vector by GTSAM's key order;
-    checked against reading every ``X(k)`` by key, with stations, twists and offsets present."""
+def test_layout_reads_every_family_by_key():
+    """The layout's vectorised reads of values and steps agree with reading every key on its
+    own, with stations, poses, twists and offsets present; the board step is the largest
+    pose step."""
     sim = _capture("default", duration_s=0.5)
-    problem = build_problem(sim.board, sim.angles, {}, 0)
-    graph, _ = build_graph(problem, GraphOptions())
-    values = initial_values(initialise(sim.board, sim.angles, problem))
+    problem, graph, ev, values = _graph(sim, GraphOptions())
+    layout = ev.layout
     delta = graph.linearize(values).optimize()
-    steps = np.array([delta.at(X(k)) for k in range(problem.n_states)])
-    rad, m = _board_steps(delta, problem.n_states)
-    assert rad == pytest.approx(np.linalg.norm(steps[:, :3], axis=1).max(), rel=1e-12)
-    assert m == pytest.approx(np.linalg.norm(steps[:, 3:], axis=1).max(), rel=1e-12)
+    for family in (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE):
+        by_key = np.array([delta.at(key) for key in layout.keys(family)])
+        np.testing.assert_array_equal(layout.read_steps(delta, family), by_key)
+    poses = layout.read_poses(values)
+    for family in (BOARD_POSE, STATION_POSE):
+        by_key = np.array([values.atPose3(key).matrix() for key in layout.keys(family)])
+        np.testing.assert_array_equal(poses[family], by_key)
+    for family in (BOARD_TWIST, SWEEP_OFFSET):
+        by_key = np.array([values.atVector(key) for key in layout.keys(family)])
+        np.testing.assert_array_equal(layout.read_vectors(values, family), by_key)
+    steps = np.array([delta.at(BOARD_POSE.key(k)) for k in range(problem.n_states)])
+    rad, m = largest_board_step(delta, layout)
+    assert rad == np.linalg.norm(steps[:, :3], axis=1).max()
+    assert m == np.linalg.norm(steps[:, 3:], axis=1).max()
+
+
+def test_elimination_ordering_follows_the_families():
+    """Leaf families first, the chain state by state, the root last; a new chain family (an
+    IMU bias, say) joins the chain without other changes."""
+    bias = VariableFamily("imu bias", "b", 6, False, "chain", 0.1, "accelerometer/gyro bias")
+    layout = VariableLayout({BOARD_POSE: range(3), BOARD_TWIST: range(3), bias: range(3),
+                             SWEEP_OFFSET: range(3), STATION_POSE: range(1, 3)})
+    o, x, w, b, L = (f.key for f in (SWEEP_OFFSET, BOARD_POSE, BOARD_TWIST, bias, STATION_POSE))
+    expected = ([o(0), o(1), o(2)] + [key for k in range(3) for key in (x(k), w(k), b(k))]
+                + [L(1), L(2)])
+    ordering = layout.elimination_ordering()
+    assert [ordering.at(i) for i in range(ordering.size())] == expected
+    assert all(f.key(i) == gtsam.symbol(f.symbol, i) for f in (bias, BOARD_POSE, STATION_POSE)
+               for i in (0, 7, 2**40))
+    with pytest.raises(ValueError, match="same state indices"):
+        VariableLayout({BOARD_POSE: range(3), BOARD_TWIST: range(2)})

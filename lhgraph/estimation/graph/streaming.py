@@ -14,16 +14,24 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, L, V, X
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
+from lhgraph.estimation.graph.factors import FactorBuilder
+from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.graph.variables import (
+    BOARD_POSE,
+    BOARD_TWIST,
+    FAMILIES,
+    STATION_POSE,
+    SWEEP_OFFSET,
+)
 from lhgraph.estimation.problem import build_problem
 from lhgraph.estimation.residuals import (
     BearingHits,
@@ -54,15 +62,15 @@ def _bearing_error(hits: BearingHits, k: int, slot: int, model: StationModel) ->
     models = [StationModel()] * slot + [model]
 
     def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
-        Xk = values.atPose3(X(k)).matrix()[None]
-        Vk = values.atVector(V(k))[None]
+        Xk = values.atPose3(BOARD_POSE.key(k)).matrix()[None]
+        Wk = values.atVector(BOARD_TWIST.key(k))[None]
         Ls = np.repeat(np.eye(4)[None], slot + 1, axis=0)
         if slot > 0:
-            Ls[slot] = values.atPose3(L(slot)).matrix()
-        r, HX, HV, HL = bearing_residuals(hits, Xk, Vk, Ls, models, jacobians=H is not None)
-        r = r + values.atVector(B(k))[0]
+            Ls[slot] = values.atPose3(STATION_POSE.key(slot)).matrix()
+        r, HX, HW, HL = bearing_residuals(hits, Xk, Wk, Ls, models, jacobians=H is not None)
+        r = r + values.atVector(SWEEP_OFFSET.key(k))[0]
         if H is not None:
-            H[0], H[1], H[2] = HX, HV, np.ones((len(r), 1))
+            H[0], H[1], H[2] = HX, HW, np.ones((len(r), 1))
             if slot > 0:
                 H[3] = HL
         return r
@@ -73,9 +81,9 @@ def _bearing_error(hits: BearingHits, k: int, slot: int, model: StationModel) ->
 def _motion_error(k: int, dt: float) -> Callable:
     """Callback of the motion prior between states k and k+1."""
     def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
-        Xs = [values.atPose3(X(j)).matrix()[None] for j in (k, k + 1)]
-        Vs = [values.atVector(V(j))[None] for j in (k, k + 1)]
-        e, He = motion_residuals(Xs[0], Vs[0], Xs[1], Vs[1], np.array([dt]),
+        Xs = [values.atPose3(BOARD_POSE.key(j)).matrix()[None] for j in (k, k + 1)]
+        Ws = [values.atVector(BOARD_TWIST.key(j))[None] for j in (k, k + 1)]
+        e, He = motion_residuals(Xs[0], Ws[0], Xs[1], Ws[1], np.array([dt]),
                                  jacobians=H is not None)
         if H is not None:
             for j in range(4):
@@ -86,17 +94,17 @@ def _motion_error(k: int, dt: float) -> Callable:
 
 
 def _isam2_params() -> gtsam.ISAM2Params:
-    """iSAM2 settings: gtsam's defaults (relinearise variables that moved more than 0.1,
-    every 10th update), except that twists and sweep offsets are relinearised only beyond
-    1.0: the motion prior is linear in the twists and the bearing factors nearly so (they
-    see a twist only through the < 0.2 ms spread of a sweep), and linear in the offsets.
-    Relinearising them with the poses cost a 50 ms spike every 10th update (mean 7.8 ms
-    against 3.7 ms, same station estimate; ``benchmarks/graph_benchmark.py``)."""
+    """iSAM2 settings: gtsam's defaults (every 10th update), relinearising each variable
+    family beyond its ``relinearize_threshold``: 0.1 (gtsam's default) for the poses, 1.0 for
+    the twists and sweep offsets: the motion prior is linear in the twists and the bearing
+    factors nearly so (they see a twist only through the < 0.2 ms spread of a sweep), and
+    linear in the offsets. Relinearising them with the poses cost a 50 ms spike every 10th
+    update (mean 7.8 ms against 3.7 ms, same station estimate;
+    ``benchmarks/graph_benchmark.py``)."""
     params = gtsam.ISAM2Params()
     thresholds = gtsam.ISAM2ThresholdMap()
-    for symbol, threshold in (("x", [0.1] * 6), ("l", [0.1] * 6), ("v", [1.0] * 6),
-                              ("b", [1.0])):
-        thresholds.insert((symbol, np.array(threshold)[:, None]))
+    for family in FAMILIES:
+        thresholds.insert((family.symbol, np.full((family.dim, 1), family.relinearize_threshold)))
     params.setRelinearizeThreshold(thresholds)
     return params
 
@@ -120,6 +128,8 @@ class StreamingSolver:
         self._last: tuple[float, Array, Array] | None = None  # time, pose, twist of last state
         self._psd = (self.options.accel_psd_rot, self.options.accel_psd_pos)
         self._sigma = self.options.angle_sigma_rad  # the warm-up solve's learned value later
+        self._factors = FactorBuilder(RobustLoss(self.options.loss, self.options.huber_k),
+                                      self.options.sweep_offset_sigma_rad)
 
     def add(self, chunk: Angles) -> StreamingEstimate | None:
         """Add the hits of one or more complete sync cycles; returns the current estimate
@@ -143,13 +153,13 @@ class StreamingSolver:
         poses = {self.station_ids[0]: np.eye(4)}
         covs = {self.station_ids[0]: np.zeros((6, 6))}
         for slot, sid in enumerate(self.station_ids[1:], start=1):
-            poses[sid] = values.atPose3(L(slot)).matrix()
-            covs[sid] = self._smoother.marginalCovariance(L(slot))
+            poses[sid] = values.atPose3(STATION_POSE.key(slot)).matrix()
+            covs[sid] = self._smoother.marginalCovariance(STATION_POSE.key(slot))
         return StreamingEstimate(self._last[0], poses, covs, update_s)
 
     def _start(self, data: Angles) -> None:
-        options = GraphOptions(**{**self.options.__dict__, "reference": self.station_ids[0]})
-        batch = solve_graph(self.board, data, self.models, options)
+        batch = solve_graph(self.board, data, self.models,
+                            replace(self.options, reference=self.station_ids[0]))
         self._psd = (batch.diagnostics.get("accel_psd_rot", self._psd[0]),
                      batch.diagnostics.get("accel_psd_pos", self._psd[1]))
         self._sigma = batch.diagnostics.get("angle_sigma_rad", self._sigma)
@@ -160,30 +170,31 @@ class StreamingSolver:
         t_now = float(batch.trajectory.time[-1])
         for slot, sid in enumerate(self.station_ids[1:], start=1):
             T = batch.stations.pose(sid)
-            values.insert(L(slot), gtsam.Pose3(T))
-            stamps.insert((L(slot), t_now))
+            values.insert(STATION_POSE.key(slot), gtsam.Pose3(T))
+            stamps.insert((STATION_POSE.key(slot), t_now))
             # the batch result as a prior keeps what the warm-up data said about the station
             cov = batch.stations.stations[sid].covariance
-            graph.add(gtsam.PriorFactorPose3(L(slot), gtsam.Pose3(T),
+            graph.add(gtsam.PriorFactorPose3(STATION_POSE.key(slot), gtsam.Pose3(T),
                                              gtsam.noiseModel.Gaussian.Covariance(cov)))
         # the last warm-up state starts the chain, with a prior from the batch solution
         T_last = batch.trajectory.T_world_board[-1]
-        V_last = (np.linalg.inv(batch.trajectory.T_world_board[-2]) @ T_last)
+        T_step = np.linalg.inv(batch.trajectory.T_world_board[-2]) @ T_last
         dt = batch.trajectory.time[-1] - batch.trajectory.time[-2]
-        xi = gtsam.Pose3.Logmap(gtsam.Pose3(V_last)) / dt
+        xi = gtsam.Pose3.Logmap(gtsam.Pose3(T_step)) / dt
         k = self._new_state(values, stamps, t_now, T_last, xi)
-        graph.add(gtsam.PriorFactorPose3(X(k), gtsam.Pose3(T_last),
+        graph.add(gtsam.PriorFactorPose3(BOARD_POSE.key(k), gtsam.Pose3(T_last),
                                          gtsam.noiseModel.Isotropic.Sigma(6, 1e-3)))
-        graph.add(gtsam.PriorFactorVector(V(k), xi, gtsam.noiseModel.Isotropic.Sigma(6, 0.5)))
+        graph.add(gtsam.PriorFactorVector(BOARD_TWIST.key(k), xi,
+                                          gtsam.noiseModel.Isotropic.Sigma(6, 0.5)))
         self._smoother.update(graph, values, stamps)
 
     def _new_state(self, values: gtsam.Values, stamps, t: float, T: Array, xi: Array) -> int:
         k = self._k
-        values.insert(X(k), gtsam.Pose3(T))
-        values.insert(V(k), xi)
-        values.insert(B(k), np.zeros(1))
-        for key in (X(k), V(k), B(k)):
-            stamps.insert((key, t))
+        values.insert(BOARD_POSE.key(k), gtsam.Pose3(T))
+        values.insert(BOARD_TWIST.key(k), xi)
+        values.insert(SWEEP_OFFSET.key(k), np.zeros(1))
+        for family in (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET):
+            stamps.insert((family.key(k), t))
         self._k += 1
         self._last = (t, T, xi)
         return k
@@ -194,10 +205,6 @@ class StreamingSolver:
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
-        huber = {"huber": gtsam.noiseModel.mEstimator.Huber,
-                 "cauchy": gtsam.noiseModel.mEstimator.Cauchy}[self.options.loss].Create(
-            self.options.huber_k, gtsam.noiseModel.mEstimator.Base.ReweightScheme.Scalar)
-        offset_noise = gtsam.noiseModel.Isotropic.Sigma(1, self.options.sweep_offset_sigma_rad)
         h = problem.hits
         for j in range(problem.n_states):
             t_prev, T_prev, xi = self._last
@@ -208,23 +215,18 @@ class StreamingSolver:
             slot = int(problem.state_station[j])
             sweep = BearingHits(np.zeros(b - a, dtype=np.int64), h.station[a:b], h.s_board[a:b],
                                 h.axis[a:b], h.dt[a:b], h.angle[a:b])
-            noise = gtsam.noiseModel.Robust.Create(
-                huber, gtsam.noiseModel.Isotropic.Sigma(int(b - a), self._sigma))
-            keys = [X(k), V(k), B(k)] + ([L(slot)] if slot > 0 else [])
-            graph.add(gtsam.CustomFactor(noise, keys, _bearing_error(
+            graph.add(self._factors.bearing(k, slot, int(b - a), self._sigma, _bearing_error(
                 sweep, k, slot, problem.models[slot])))
-            graph.add(gtsam.PriorFactorVector(B(k), np.zeros(1), offset_noise))
+            graph.add(self._factors.offset_prior(k))
             Q = wnoa_covariance(np.array([dt]), *self._psd)[0]
-            graph.add(gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(Q),
-                                         [X(k - 1), V(k - 1), X(k), V(k)],
-                                         _motion_error(k - 1, dt)))
+            graph.add(self._factors.motion(k - 1, Q, _motion_error(k - 1, dt)))
         t_now = self._last[0]
         for slot in range(1, len(self.station_ids)):
-            stamps.insert((L(slot), t_now))
+            stamps.insert((STATION_POSE.key(slot), t_now))
         self._smoother.update(graph, values, stamps)
         current = self._smoother.calculateEstimate()
-        self._last = (t_now, current.atPose3(X(self._k - 1)).matrix(),
-                      current.atVector(V(self._k - 1)))
+        self._last = (t_now, current.atPose3(BOARD_POSE.key(self._k - 1)).matrix(),
+                      current.atVector(BOARD_TWIST.key(self._k - 1)))
 
 
 def _concat(chunks: list[Angles]) -> Angles:

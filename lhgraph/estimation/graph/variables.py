@@ -18,7 +18,7 @@ station pose    ``l``   6    ``T_world_lh`` of station slot s >= 1 (slot 0 is th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
 import gtsam
@@ -51,10 +51,15 @@ class VariableFamily:
     elimination: Elimination
     relinearize_threshold: float
     meaning: str
+    _key0: int = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        # a gtsam Symbol key is the character in the top byte, the index below it
+        object.__setattr__(self, "_key0", gtsam.symbol(self.symbol, 0))
 
     def key(self, index: int) -> int:
-        """GTSAM key of variable ``index`` of this family."""
-        return gtsam.symbol(self.symbol, index)
+        """GTSAM key of variable ``index`` of this family (``gtsam.symbol(symbol, index)``)."""
+        return self._key0 + index
 
 
 BOARD_POSE = VariableFamily("board pose", "x", 6, True, "chain", 0.1,
