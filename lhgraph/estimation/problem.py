@@ -2,24 +2,20 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.estimation.residuals import (
-    BearingHits,
-)
+from lhgraph.estimation.residuals import BearingHits
 from lhgraph.io.angles import Angles
 from lhgraph.model.board import Board
 from lhgraph.model.lh1 import StationModel
 
 Array = NDArray[np.float64]
-Progress = Callable[[str], None]
 
 
-@dataclass
+@dataclass(frozen=True)
 class GraphProblem:
     """The measurements arranged as a graph: one state per sweep, hits sorted by state."""
 

@@ -11,7 +11,7 @@ from lhgraph.io.stations import Stations
 from lhgraph.io.trajectory import Trajectory
 
 
-@dataclass
+@dataclass(frozen=True)
 class Residuals:
     """Per-hit residuals of the final solution (one row per hit used).
 
@@ -35,7 +35,7 @@ class Residuals:
         return float(np.mean(self.weight > 0.5)) if len(self.weight) else float("nan")
 
 
-@dataclass
+@dataclass(frozen=True)
 class SolveResult:
     """Outcome of a calibration: station poses (world = reference station unless set
     otherwise), the board path, status and diagnostics. ``timings_s`` maps stage -> seconds."""

@@ -6,8 +6,9 @@ initialise; afterwards every call of :meth:`StreamingSolver.add` appends the new
 board states, bearing factors, offset priors and motion priors to GTSAM's
 ``IncrementalFixedLagSmoother`` (iSAM2 underneath) and returns the current station
 estimate. Board states older than ``lag_s`` are marginalised; the station poses never are.
-Inside iSAM2 each factor callback evaluates only its own sweep (GTSAM copies the Values for
-every Python callback, so the window, not the capture, sets the cost).
+The factors come from the batch graph's :class:`FactorBuilder`; inside iSAM2 each factor
+callback evaluates only its own sweep (GTSAM copies the Values for every Python callback, so
+the window, not the capture, sets the cost).
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ from lhgraph.model.lh1 import StationModel
 Array = NDArray[np.float64]
 
 
-@dataclass
+@dataclass(frozen=True)
 class StreamingEstimate:
     """Station poses ``T_world_lh`` (index -> 4x4) and covariances after an update."""
 
