@@ -111,6 +111,17 @@ def decode_frame(encoded: bytes) -> Frame:
     return Frame(kind, seq, raw[4:-4])
 
 
+_INFO = struct.Struct("<HHIIIIII")
+_STATUS = struct.Struct("<BBHIIIIIIIII")
+
+
+def _unpack_answer(name: str, layout: struct.Struct, payload: bytes) -> tuple[int, ...]:
+    """The fields of an answer payload; DeviceError when its length is not the layout's."""
+    if len(payload) != layout.size:
+        raise DeviceError(f"{name} answer has {len(payload)} bytes, expected {layout.size}")
+    return layout.unpack(payload)
+
+
 @dataclass(frozen=True)
 class BoardInfo:
     """Answer to INFO."""
@@ -127,9 +138,7 @@ class BoardInfo:
     @classmethod
     def parse(cls, payload: bytes) -> BoardInfo:
         """Decode an INFO payload (28 bytes)."""
-        if len(payload) != 28:
-            raise DeviceError(f"INFO answer has {len(payload)} bytes, expected 28")
-        return cls(*struct.unpack("<HHIIIIII", payload))
+        return cls(*_unpack_answer("INFO", _INFO, payload))
 
 
 @dataclass(frozen=True)
@@ -152,9 +161,7 @@ class BoardStatus:
     @classmethod
     def parse(cls, payload: bytes) -> BoardStatus:
         """Decode a STATUS payload (40 bytes)."""
-        if len(payload) != 40:
-            raise DeviceError(f"STATUS answer has {len(payload)} bytes, expected 40")
-        return cls(*struct.unpack("<BBHIIIIIIIII", payload))
+        return cls(*_unpack_answer("STATUS", _STATUS, payload))
 
     @property
     def state_name(self) -> str:
