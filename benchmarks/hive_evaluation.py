@@ -39,6 +39,7 @@ from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser, consistent_path
 from lhgraph.estimation.init.pnp_nonplanar import tracker_board_poses
+from lhgraph.estimation.metrics import station_errors
 from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.estimation.result import SolveResult
 from lhgraph.importers.hive import align_to_mocap, import_hive
@@ -47,7 +48,6 @@ from lhgraph.io.trajectory import Trajectory, load_trajectory
 from lhgraph.model.board import Board, load_board
 from lhgraph.model.lh1 import Convention, StationModel
 from lhgraph.workflow.inputs import station_models
-from lhgraph.workflow.metrics import station_errors
 from lhgraph.workflow.window import motion_start
 
 REPO = Path(__file__).resolve().parents[1]

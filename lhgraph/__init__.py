@@ -1,9 +1,9 @@
-"""lhgraph: factor-graph calibration of Lighthouse v1 base stations.
+"""lhgraph: factor-graph calibration of Lighthouse base stations.
 
-Modules: ``model`` (measurement model), ``transforms`` (SE(3) helpers), ``board``,
-``angles``, ``stations``, ``calibration``, ``trajectory`` (contract files), ``metrics``,
-``simulate``, ``baseline`` (the paper's method), ``graph`` (the factor-graph solver),
-``cli``.
+Subpackages by concern, from the bottom layer up (docs/architecture.md): ``geometry``,
+``model``, ``io``, ``signal``, ``device``, ``estimation``, ``sim``, ``importers``, ``report``,
+``workflow``; ``config`` (option declarations and TOML loading), ``errors`` (the exception
+hierarchy) and ``cli`` (the command line, a thin layer over the rest).
 """
 
 __version__ = "0.1.0"

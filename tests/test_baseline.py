@@ -20,6 +20,7 @@ from lhgraph.estimation.baseline.station_pose import (
     interpolate_path,
     refine_station_pose,
 )
+from lhgraph.estimation.metrics import station_errors
 from lhgraph.estimation.reconstruct import Measurements, reconstruct_measurements
 from lhgraph.geometry.transforms import (
     interpolate_poses,
@@ -34,7 +35,6 @@ from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.boards import paper_board
 from lhgraph.model.lh1 import FactoryCalibration, StationModel, ideal_angles
 from lhgraph.sim.simulate import load_simulation_config, parse_simulation_config, simulate
-from lhgraph.workflow.metrics import station_errors
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT = ROOT / "configs" / "simulation" / "default.toml"

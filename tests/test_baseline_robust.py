@@ -16,6 +16,7 @@ from lhgraph.errors import InputError
 from lhgraph.estimation.baseline import PaperOptions, solve_paper
 from lhgraph.estimation.baseline.board_poses import BoardPoses, outliers, reject_outlier_poses
 from lhgraph.estimation.baseline.station_pose import refine_station_pose
+from lhgraph.estimation.metrics import station_errors
 from lhgraph.estimation.reconstruct import Measurements
 from lhgraph.geometry.transforms import make_pose, rotation_angle, so3_exp, transform_points
 from lhgraph.io.angles import Angles
@@ -23,7 +24,6 @@ from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.boards import paper_board
 from lhgraph.model.lh1 import ideal_angles
 from lhgraph.sim.simulate import load_simulation_config, simulate
-from lhgraph.workflow.metrics import station_errors
 
 DEFAULT = Path(__file__).resolve().parent.parent / "configs" / "simulation" / "default.toml"
 BOARD = paper_board()

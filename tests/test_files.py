@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from lhgraph.errors import InputError
+from lhgraph.estimation.metrics import station_errors
 from lhgraph.geometry.transforms import se3_exp, so3_exp
 from lhgraph.io.angles import Angles, load_angles, save_angles
 from lhgraph.io.stations import Station, Stations, load_stations, save_stations
@@ -17,7 +18,6 @@ from lhgraph.io.trajectory import Trajectory, load_trajectory, save_trajectory
 from lhgraph.model.board import load_board, make_board, save_board
 from lhgraph.model.calibration import StationCalibration, load_calibration, save_calibration
 from lhgraph.model.lh1 import FactoryCalibration, StationModel
-from lhgraph.workflow.metrics import station_errors
 
 HEADER = "time,lighthouse,axis,sensor,angle\n"
 

@@ -32,11 +32,11 @@ from lhgraph.estimation.graph.variables import (
     initial_values,
 )
 from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser, consistent_path
+from lhgraph.estimation.metrics import station_errors
 from lhgraph.estimation.problem import build_problem
 from lhgraph.geometry.transforms import inverse, make_pose, se3_exp, se3_log, so3_exp
 from lhgraph.io.angles import Angles
 from lhgraph.sim.simulate import load_simulation_config, simulate
-from lhgraph.workflow.metrics import station_errors
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "simulation"
 

@@ -1,1 +1,2 @@
-"""lhgraph.importers."""
+"""Foreign recordings into contract files, one package per source (``hive``).
+"""

@@ -6,9 +6,9 @@ from typing import Any
 
 import numpy as np
 
+from lhgraph.estimation.metrics import PoseError
 from lhgraph.estimation.result import SolveResult
 from lhgraph.geometry.transforms import euler_zyx
-from lhgraph.workflow.metrics import PoseError
 
 
 def format_solution(result: SolveResult, errors: list[PoseError] | None = None) -> str:

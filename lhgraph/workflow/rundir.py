@@ -26,13 +26,13 @@ from typing import Any
 import numpy as np
 
 from lhgraph.errors import InputError
+from lhgraph.estimation.metrics import PoseError, station_errors
 from lhgraph.estimation.result import Residuals, SolveResult
 from lhgraph.geometry.transforms import matrix_to_quat
 from lhgraph.io.files import check_writable, write_atomic, write_csv_columns
 from lhgraph.io.stations import Stations, load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
 from lhgraph.workflow.inputs import SolveInputs, check_inputs, load_inputs
-from lhgraph.workflow.metrics import PoseError, station_errors
 from lhgraph.workflow.solve import solve
 from lhgraph.workflow.solve_config import SolveConfig
 

@@ -21,6 +21,7 @@ from lhgraph.errors import InputError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.gravity import to_gravity_world
+from lhgraph.estimation.metrics import PoseError, station_errors
 from lhgraph.estimation.result import SolveResult
 from lhgraph.io.angles import Angles
 from lhgraph.io.files import check_writable
@@ -29,7 +30,6 @@ from lhgraph.io.trajectory import save_trajectory
 from lhgraph.model.board import Board
 from lhgraph.model.lh1 import StationModel
 from lhgraph.workflow.inputs import check_inputs, load_inputs
-from lhgraph.workflow.metrics import PoseError, station_errors
 from lhgraph.workflow.solve_config import METHODS, SolveConfig
 
 if TYPE_CHECKING:
