@@ -62,3 +62,12 @@ def test_board_by_name(tmp_path):
     np.testing.assert_allclose(loaded.positions, paper_board().positions)
     with pytest.raises(InputError, match=r"cfg\.toml:board: board 'nope'"):
         board_by_name("nope", tmp_path, "cfg.toml", "board")
+
+
+def test_crazyflie_deck_geometry():
+    b = board_by_name("crazyflie_deck")
+    assert b.ids.tolist() == [0, 1, 2, 3] and b.is_planar()
+    # 30 mm apart along x, 15 mm along y, around the origin; ids (-,+), (-,-), (+,+), (+,-)
+    np.testing.assert_allclose(np.sign(b.positions[:, :2]), [[-1, 1], [-1, -1], [1, 1], [1, -1]])
+    np.testing.assert_allclose(np.ptp(b.positions, axis=0), [0.030, 0.015, 0.0])
+    np.testing.assert_allclose(b.normals, np.tile([0, 0, 1.0], (4, 1)))

@@ -13,6 +13,9 @@ row from (-x, -y) to (+x, +y).
   itself. Heights follow the pyramid surface ``z = (60 mm - max(|x|, |y|)) tan(tilt)``,
   then the whole board is shifted so the diodes' centroid is the origin. Stations far off
   the board's normal (e.g. facing each other 160 degrees apart) still see one or two faces.
+- ``crazyflie_deck``: Bitcraze's Lighthouse deck on a Crazyflie, 4 diodes in the Crazyflie's
+  body frame (x forward, y left, z up; origin at the deck's centre), 30 mm apart along x and
+  15 mm along y, normals +z; ids 0-3 at (x, y) = (-, +), (-, -), (+, +), (+, -).
 """
 
 from __future__ import annotations
@@ -69,9 +72,22 @@ def pyramid_board(tilt_deg: float = 30.0) -> Board:
     return make_board(positions, normals, name="pyramid32")
 
 
+DECK_HALF_X_M = 0.015
+DECK_HALF_Y_M = 0.0075
+
+
+def crazyflie_deck() -> Board:
+    """The Crazyflie Lighthouse deck's 4 diodes (see module docstring), Crazyflie body frame."""
+    sx = np.array([-1.0, -1.0, 1.0, 1.0])
+    sy = np.array([1.0, -1.0, 1.0, -1.0])
+    positions = np.column_stack([sx * DECK_HALF_X_M, sy * DECK_HALF_Y_M, np.zeros(4)])
+    return make_board(positions, np.tile([0.0, 0.0, 1.0], (4, 1)), name="crazyflie_deck")
+
+
 BUILTIN_BOARDS: dict[str, Callable[[], Board]] = {
     "paper32": paper_board,
     "pyramid32": pyramid_board,
+    "crazyflie_deck": crazyflie_deck,
 }
 
 
