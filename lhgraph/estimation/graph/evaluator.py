@@ -54,10 +54,13 @@ class FactorEvaluator:
     :meth:`robust_weights`, :meth:`station_poses`, :meth:`board_poses`,
     :meth:`board_twists`; noise levels: :meth:`angle_sigma`, :meth:`motion_psd`,
     :meth:`motion_psd_factor`, :meth:`motion_chi2_per_dof`.
+
+    Station slots that are no variable of ``layout`` are held at ``T_world_lh`` ``(S, 4, 4)``
+    (default: the identity, i.e. the reference station is the world).
     """
 
     def __init__(self, problem: GraphProblem, layout: VariableLayout, loss: RobustLoss,
-                 options: GraphOptions):
+                 options: GraphOptions, T_world_lh: Array | None = None):
         self.problem = problem
         self.layout = layout
         self.loss = loss
@@ -67,7 +70,9 @@ class FactorEvaluator:
         K, S = problem.n_states, len(problem.station_ids)
         self._X = np.full((K, 4, 4), np.nan)
         self._W = np.full((K, 6), np.nan)
-        self._L = np.repeat(np.eye(4)[None], S, axis=0)
+        # station slots that are no variable of the layout stay at these poses
+        self._L = (np.repeat(np.eye(4)[None], S, axis=0) if T_world_lh is None
+                   else np.array(T_world_lh, dtype=float))
         self._O = np.full(K, np.nan)
         self._dt = np.diff(problem.state_time)
         self._ones = np.ones((len(problem.hits.angle), 1))
@@ -140,7 +145,7 @@ class FactorEvaluator:
         return self.loss.weights(self._r, self.angle_sigma())
 
     def station_poses(self) -> Array:
-        """``T_world_lh`` of every station slot ``(S, 4, 4)`` (slot 0, the world: identity)."""
+        """``T_world_lh`` of every station slot ``(S, 4, 4)`` (fixed ones as given)."""
         return _read_only(self._L)
 
     def board_poses(self) -> Array:
@@ -157,7 +162,7 @@ class FactorEvaluator:
         """Callback of sweep k's bearing factor (station ``slot``; keys as in
         :func:`lhgraph.estimation.graph.factors.bearing_keys`)."""
         a, b = self.problem.bounds[k], self.problem.bounds[k + 1]
-        station_var = slot if slot > 0 else None
+        station_var = slot if self.layout.holds(STATION_POSE, slot) else None
 
         def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
             self._ensure(values, k, station_var)
@@ -198,7 +203,7 @@ class FactorEvaluator:
 
     def _read(self, values: gtsam.Values) -> None:
         poses = self.layout.read_poses(values)
-        self._L[1:] = poses[STATION_POSE]
+        self._L[self.layout.indices(STATION_POSE)] = poses[STATION_POSE]
         self._X = poses[BOARD_POSE]
         self._W = self.layout.read_vectors(values, BOARD_TWIST)
         self._O = self.layout.read_vectors(values, SWEEP_OFFSET)[:, 0]

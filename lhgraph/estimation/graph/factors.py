@@ -1,7 +1,8 @@
 """The graph's factors, built in one place for the batch solve and the streaming smoother.
 
 1. **Bearing factor**, one per sweep k, keys :func:`bearing_keys` (board pose, twist and sweep
-   offset of state k, and the station's pose unless it is the reference): one row per diode
+   offset of state k, and the station's pose unless it is held fixed: the reference, or
+   every station when tracking): one row per diode
    hit in that sweep, residual = predicted angle of the full station model + sweep offset -
    measured, isotropic diode noise wrapped in the per-diode robust loss
    (:mod:`lhgraph.estimation.graph.loss`);
@@ -35,10 +36,11 @@ from lhgraph.estimation.problem import GraphProblem
 Array = NDArray[np.float64]
 
 
-def bearing_keys(k: int, slot: int) -> list[int]:
-    """Keys of sweep k's bearing factor seen by station ``slot`` (slot 0 is no variable)."""
+def bearing_keys(k: int, station_var: int | None) -> list[int]:
+    """Keys of sweep k's bearing factor; ``station_var``: the slot of the sweeping station
+    when its pose is a variable, None when it is held fixed (the reference)."""
     keys = [BOARD_POSE.key(k), BOARD_TWIST.key(k), SWEEP_OFFSET.key(k)]
-    return keys + [STATION_POSE.key(slot)] if slot > 0 else keys
+    return keys if station_var is None else keys + [STATION_POSE.key(station_var)]
 
 
 def motion_keys(k: int) -> list[int]:
@@ -53,12 +55,13 @@ class FactorBuilder:
         self._estimator = loss.estimator()
         self._offset_noise = gtsam.noiseModel.Isotropic.Sigma(1, sweep_offset_sigma_rad)
 
-    def bearing(self, k: int, slot: int, n_hits: int, angle_sigma_rad: float,
+    def bearing(self, k: int, station_var: int | None, n_hits: int, angle_sigma_rad: float,
                 error: FactorError) -> gtsam.CustomFactor:
-        """Sweep k's bearing factor: ``n_hits`` diodes of noise ``angle_sigma_rad``, robust."""
+        """Sweep k's bearing factor: ``n_hits`` diodes of noise ``angle_sigma_rad``, robust;
+        ``station_var`` as in :func:`bearing_keys`."""
         noise = gtsam.noiseModel.Robust.Create(
             self._estimator, gtsam.noiseModel.Isotropic.Sigma(n_hits, angle_sigma_rad))
-        return gtsam.CustomFactor(noise, bearing_keys(k, slot), error)
+        return gtsam.CustomFactor(noise, bearing_keys(k, station_var), error)
 
     def offset_prior(self, k: int) -> gtsam.PriorFactorVector:
         """The zero-mean prior on sweep k's offset."""
@@ -70,19 +73,23 @@ class FactorBuilder:
                                   motion_keys(k), error)
 
 
-def build_graph(problem: GraphProblem, options: GraphOptions
+def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array | None = None
                 ) -> tuple[gtsam.NonlinearFactorGraph, FactorEvaluator]:
     """The nonlinear factor graph of ``problem`` (one bearing factor per sweep, the offset
-    priors, the motion priors) and the evaluator its callbacks slice."""
+    priors, the motion priors) and the evaluator its callbacks slice. ``T_world_lh``
+    ``(S, 4, 4)`` by station slot holds every station fixed at that pose (tracking); without
+    it the stations but the reference are variables."""
     loss = RobustLoss(options.loss, options.huber_k)
-    layout = VariableLayout.of_problem(problem.n_states, len(problem.station_ids))
-    ev = FactorEvaluator(problem, layout, loss, options)
+    layout = VariableLayout.of_problem(problem.n_states, len(problem.station_ids),
+                                       fixed_stations=T_world_lh is not None)
+    ev = FactorEvaluator(problem, layout, loss, options, T_world_lh)
     build = FactorBuilder(loss, options.sweep_offset_sigma_rad)
     graph = gtsam.NonlinearFactorGraph()
     for k in range(problem.n_states):
         n = int(problem.bounds[k + 1] - problem.bounds[k])
         slot = int(problem.state_station[k])
-        graph.add(build.bearing(k, slot, n, options.angle_sigma_rad, ev.bearing_error(k, slot)))
+        var = slot if layout.holds(STATION_POSE, slot) else None
+        graph.add(build.bearing(k, var, n, options.angle_sigma_rad, ev.bearing_error(k, slot)))
     for k in range(problem.n_states):
         graph.add(build.offset_prior(k))
     for k in range(problem.n_states - 1):

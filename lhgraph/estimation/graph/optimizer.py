@@ -122,11 +122,12 @@ def largest_board_step(delta: gtsam.VectorValues, layout: VariableLayout) -> tup
 
 def _root_step_sigmas(tree: gtsam.GaussianBayesTree, delta: gtsam.VectorValues,
                       layout: VariableLayout) -> float:
-    """Largest step of any root-variable (station) coordinate in its standard deviations."""
+    """Largest step of any root-variable (station) coordinate in its standard deviations
+    (0 without root variables: tracking, the stations held fixed)."""
     steps = [np.abs(delta.at(key)) / np.sqrt(np.diag(tree.marginalCovariance(key)))
              for family in layout.families if family.elimination == "root"
              for key in layout.keys(family)]
-    return float(np.max(steps))
+    return float(np.max(steps)) if steps else 0.0
 
 
 def _damping(values: gtsam.Values, lam: float) -> gtsam.GaussianFactorGraph:

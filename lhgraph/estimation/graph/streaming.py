@@ -216,8 +216,9 @@ class StreamingSolver:
             slot = int(problem.state_station[j])
             sweep = BearingHits(np.zeros(b - a, dtype=np.int64), h.station[a:b], h.s_board[a:b],
                                 h.axis[a:b], h.dt[a:b], h.angle[a:b])
-            graph.add(self._factors.bearing(k, slot, int(b - a), self._sigma, _bearing_error(
-                sweep, k, slot, problem.models[slot])))
+            graph.add(self._factors.bearing(k, slot if slot > 0 else None, int(b - a),
+                                            self._sigma, _bearing_error(sweep, k, slot,
+                                                                        problem.models[slot])))
             graph.add(self._factors.offset_prior(k))
             Q = wnoa_covariance(np.array([dt]), *self._psd)[0]
             graph.add(self._factors.motion(k - 1, Q, _motion_error(k - 1, dt)))

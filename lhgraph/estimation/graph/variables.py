@@ -97,12 +97,15 @@ class VariableLayout:
         self._n_poses = start
 
     @classmethod
-    def of_problem(cls, n_states: int, n_stations: int) -> VariableLayout:
+    def of_problem(cls, n_states: int, n_stations: int, fixed_stations: bool = False
+                   ) -> VariableLayout:
         """The batch graph's layout: every family per board state ``0..n_states-1``, a station
-        pose for slots ``1..n_stations-1``."""
+        pose for slots ``1..n_stations-1`` (none with ``fixed_stations``: tracking, every
+        station held at a known pose)."""
         states = range(n_states)
+        stations = range(0) if fixed_stations else range(1, n_stations)
         return cls({BOARD_POSE: states, BOARD_TWIST: states, SWEEP_OFFSET: states,
-                    STATION_POSE: range(1, n_stations)})
+                    STATION_POSE: stations})
 
     @property
     def families(self) -> tuple[VariableFamily, ...]:
@@ -110,6 +113,11 @@ class VariableLayout:
 
     def indices(self, family: VariableFamily) -> range:
         return self._indices[family]
+
+    def holds(self, family: VariableFamily, index: int) -> bool:
+        """Whether variable ``index`` of ``family`` is one of this graph's (a station slot
+        that is not held fixed, say)."""
+        return index in self._indices.get(family, range(0))
 
     def keys(self, family: VariableFamily) -> list[int]:
         """Keys of ``family``, in index order."""
@@ -163,7 +171,7 @@ class VariableLayout:
 def initial_values(layout: VariableLayout, init: Initialisation) -> gtsam.Values:
     """GTSAM Values of an initialisation (sweep offsets zero)."""
     values = gtsam.Values()
-    layout.insert(values, STATION_POSE, init.L[1:])
+    layout.insert(values, STATION_POSE, init.L[layout.indices(STATION_POSE)])
     layout.insert(values, BOARD_POSE, init.X)
     layout.insert(values, BOARD_TWIST, init.V)
     layout.insert(values, SWEEP_OFFSET, np.zeros((len(init.X), 1)))
