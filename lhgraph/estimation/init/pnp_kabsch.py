@@ -52,10 +52,10 @@ def _station_path(board: Board, angles: Angles, problem: GraphProblem, pose_solv
     return meas.time[ok], pnp.T_lh_board[ok], pnp.rms_rad[ok]
 
 
-def _station_paths(board: Board, angles: Angles, problem: GraphProblem,
-                   pose_solver: PoseSolver) -> list[tuple[Array, Array, Array]]:
-    """Every station slot's path, the stations in parallel threads (numpy releases the GIL
-    in its array loops)."""
+def station_paths(board: Board, angles: Angles, problem: GraphProblem,
+                  pose_solver: PoseSolver) -> list[tuple[Array, Array, Array]]:
+    """Every station slot's path ``(times, T_lh_board, rms)``, the stations in parallel
+    threads (numpy releases the GIL in its array loops)."""
     slots = range(len(problem.station_ids))
     with ThreadPoolExecutor(max_workers=min(len(slots), len(os.sched_getaffinity(0)))) as pool:
         return list(pool.map(partial(_station_path, board, angles, problem, pose_solver), slots))
@@ -102,7 +102,7 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
     """Initial values from per-station PnP paths (``pose_solver`` per measurement) and a
     weighted Kabsch on sensor points; twists from the merged path's change over
     ``velocity_span_s``."""
-    paths = _station_paths(board, angles, problem, pose_solver)
+    paths = station_paths(board, angles, problem, pose_solver)
     t_ref, T_ref, _ = paths[0]
     if len(t_ref) < 2:
         raise SolverError(f"station {problem.station_ids[0]} (reference): too few usable "
@@ -129,20 +129,26 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
         dst = transform_points(T_ref_at[agree][:, None], board.positions[None])  # reference
         w = np.repeat(1.0 / (rms_s[ok][agree] ** 2 + 1e-10), len(board.positions))
         L0[slot] = weighted_kabsch(src.reshape(-1, 3), dst.reshape(-1, 3), w)
-    # board path in the world from every station, merged by time
+    X0, V0 = world_states(paths, L0, problem.state_time, velocity_span_s)
+    return Initialisation(L0, X0, V0, overlap)
+
+
+def world_states(paths: list[tuple[Array, Array, Array]], T_world_lh: Array, t: Array,
+                 velocity_span_s: float = 0.01) -> tuple[Array, Array]:
+    """Board poses ``T_world_board`` (K, 4, 4) and body twists (K, 6) at times ``t`` (K,) (s)
+    from every station slot's path (:func:`station_paths`) put into the world by its
+    ``T_world_lh`` (S, 4, 4) and merged by time: poses interpolated (clamped at the ends),
+    twists by central differences over ``velocity_span_s`` on the merged path."""
     times = np.concatenate([p[0] for p in paths])
-    T_all = np.concatenate([L0[slot] @ paths[slot][1] for slot in range(S)])
+    T_all = np.concatenate([T_world_lh[slot] @ path[1] for slot, path in enumerate(paths)])
     order = np.argsort(times, kind="stable")
     times, T_all = times[order], T_all[order]
     keep = np.r_[True, np.diff(times) > 0]
-    # poses at the states, and twists by central differences over +-h on the merged path
-    # (states may be closer together than h)
+    # states may be closer together than the span
     h = 0.5 * velocity_span_s
-    t = problem.state_time
     X0, before, after = interpolate_poses(times[keep], T_all[keep],
                                           np.concatenate([t, t - h, t + h])).reshape(3, -1, 4, 4)
-    V0 = se3_log(inverse(before) @ after) / (2 * h)
-    return Initialisation(L0, X0, V0, overlap)
+    return X0, se3_log(inverse(before) @ after) / (2 * h)
 
 
 @dataclass(frozen=True)
