@@ -258,12 +258,36 @@ def _run_import_hive(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_import_crazyflie(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("crazyflie", help="Crazyflie uSD log (Lighthouse deck, LH1)",
+                       description="Convert a Crazyflie uSD event log (docs/crazyflie.md) into "
+                       "angles.csv, board.toml, imu.csv, mocap.csv and, with --system-config, "
+                       "ootx.toml and stations-cfclient.toml in the output directory.")
+    p.add_argument("log", help="uSD event log (e.g. log02)")
+    p.add_argument("--system-config", help="cfclient system-configuration YAML")
+    p.add_argument("--mocap", help="Qualisys mocapNN.npy (default: beside logNN)")
+    p.add_argument("--output", "-o", required=True, help="directory to write the files into")
+    _add_common_output(p)
+    p.set_defaults(_import=_run_import_crazyflie)
+
+
+def _run_import_crazyflie(args: argparse.Namespace) -> int:
+    from lhgraph.importers.crazyflie import import_crazyflie
+
+    result = import_crazyflie(args.log, args.output, args.system_config, args.mocap,
+                              overwrite=args.force)
+    if not args.quiet:
+        print(result.summary())
+    return 0
+
+
 def add_import(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("import", help="convert a foreign recording into lhgraph files",
                        description="Convert a recording made by other software into the "
                        "contract files (angles, board, factory calibration, ...).")
     formats = p.add_subparsers(dest="source", required=True, metavar="SOURCE")
     _add_import_hive(formats)
+    _add_import_crazyflie(formats)
     return p
 
 

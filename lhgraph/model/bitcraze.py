@@ -76,8 +76,10 @@ def calibration_to_bitcraze(calibration: FactoryCalibration) -> list[dict[str, f
 
 def pose_from_bitcraze(origin: ArrayLike, rotation: ArrayLike) -> Array:
     """``T_world_lh`` (4x4) of a cfclient geometry: ``origin`` (m), ``rotation`` (station
-    frame to world); the frames agree with ours, see the module docstring."""
-    R = np.asarray(rotation, dtype=float).reshape(3, 3)
+    frame to world, made orthonormal: cfclient stores float32); the frames agree with ours,
+    see the module docstring."""
+    U, _, Vt = np.linalg.svd(np.asarray(rotation, dtype=float).reshape(3, 3))
+    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
     return make_pose(R, np.asarray(origin, dtype=float).reshape(3))
 
 

@@ -1,0 +1,153 @@
+"""Conversion of a Crazyflie uSD log into lhgraph contract files: :func:`import_crazyflie`
+(the ``lhgraph import crazyflie`` command, docs/crazyflie.md).
+
+Time base of every written file: the log's clock (s since the Crazyflie started).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lhgraph.errors import InputError
+from lhgraph.importers.crazyflie.mocap import (
+    Mocap,
+    align_mocap,
+    marker_events_s,
+    read_mocap_npy,
+)
+from lhgraph.importers.crazyflie.sweeps import (
+    LH2_MAX_INTERVAL_S,
+    SweepSummary,
+    lh1_angles,
+    sweep_interval_s,
+)
+from lhgraph.importers.crazyflie.systemconfig import LH2_ISSUE, SystemConfig, read_system_config
+from lhgraph.importers.crazyflie.usdlog import UsdLog, read_usd_log
+from lhgraph.io.angles import save_angles
+from lhgraph.io.files import check_writable, write_csv_columns
+from lhgraph.io.stations import Station, Stations, save_stations
+from lhgraph.model.board import save_board
+from lhgraph.model.boards import crazyflie_deck
+from lhgraph.model.calibration import save_calibration
+from lhgraph.model.lh1 import StationModel
+
+STANDARD_GRAVITY = 9.80665
+"""m/s^2 per g (the log's accelerometer unit)."""
+IMU_VARIABLES = ("acc.x", "acc.y", "acc.z", "gyro.x", "gyro.y", "gyro.z")
+
+
+@dataclass(frozen=True)
+class CrazyflieImport:
+    """What :func:`import_crazyflie` wrote and a summary of the log."""
+
+    paths: dict[str, Path]
+    version: int
+    notes: tuple[str, ...]
+    sweeps: SweepSummary
+    duration_s: float
+    imu_rate_hz: float
+    mocap: Mocap | None = None
+    skipped: tuple[str, ...] = field(default=())
+
+    def summary(self) -> str:
+        """Human-readable lines."""
+        lines = [f"uSD log version {self.version}; LH1; duration {self.duration_s:.1f} s"]
+        lines += [f"log: {n}" for n in self.notes]
+        lines += self.sweeps.lines()
+        lines.append(f"imu: {self.imu_rate_hz:.1f} Hz")
+        if self.mocap is not None:
+            lines.append(f"mocap: {len(self.mocap.time)} samples on the log clock (clock rate "
+                         f"{self.mocap.rate:.6f}), {self.mocap.n_unseen} unseen left out")
+        lines += [f"not written: {s}" for s in self.skipped]
+        lines += [f"wrote {p}" for p in self.paths.values()]
+        return "\n".join(lines)
+
+
+def default_mocap_path(log_path: str | Path) -> Path | None:
+    """The dataset's ``mocapNN.npy`` beside ``logNN`` (None when absent)."""
+    log_path = Path(log_path)
+    m = re.fullmatch(r"log(\d+)", log_path.name)
+    candidate = log_path.with_name(f"mocap{m.group(1)}.npy") if m else None
+    return candidate if candidate is not None and candidate.is_file() else None
+
+
+def check_lh1(log: UsdLog, source: str | Path) -> None:
+    """InputError unless ``log`` holds LH1 angles (LH2 logs are refused, one line)."""
+    if log.count("lhAngle") == 0:
+        raise InputError("no lhAngle events in the log", source)
+    interval = sweep_interval_s(log)
+    if interval < LH2_MAX_INTERVAL_S:
+        raise InputError(f"an LH2 log (a station's sweeps every {interval * 1e3:.1f} ms, LH1: "
+                         f"33.3 ms): {LH2_ISSUE}", source)
+
+
+def _stations(config: SystemConfig) -> Stations:
+    cals = config.calibrations
+    return Stations(
+        min(config.T_world_lh),
+        {k: Station(T, None, StationModel(cals[k].calibration) if k in cals else StationModel())
+         for k, T in config.T_world_lh.items()},
+        {"world": "cfclient"})
+
+
+def import_crazyflie(log_path: str | Path, out_dir: str | Path,
+                     system_config: str | Path | None = None, mocap: str | Path | None = None,
+                     overwrite: bool = False) -> CrazyflieImport:
+    """Convert a Crazyflie uSD log (LH1) into ``angles.csv``, ``board.toml``, ``imu.csv``,
+    with a system configuration ``ootx.toml`` and ``stations-cfclient.toml``, with a mocap
+    recording (default: ``mocapNN.npy`` beside ``logNN``) ``mocap.csv``; refuses to replace
+    files unless ``overwrite``."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError("exists and is not a directory", out)
+    config = None if system_config is None else read_system_config(system_config)
+    mocap = default_mocap_path(log_path) if mocap is None else Path(mocap)
+    names = ["angles.csv", "board.toml", "imu.csv"]
+    names += ["ootx.toml", "stations-cfclient.toml"] if config is not None else []
+    names += ["mocap.csv"] if mocap is not None else []
+    paths = {name.rsplit(".", 1)[0]: out / name for name in names}
+    log = read_usd_log(log_path)
+    check_lh1(log, log_path)
+    for p in paths.values():
+        check_writable(p, overwrite)
+    aligned = None
+    if mocap is not None:
+        aligned = align_mocap(read_mocap_npy(mocap), *marker_events_s(log, log_path))
+    angles, sweeps = lh1_angles(log)
+    save_angles(angles, paths["angles"], overwrite)
+    save_board(crazyflie_deck(), paths["board"], overwrite)
+    imu_rate = 0.0
+    if log.count("fixedFrequency"):
+        ff, t_imu = log.events["fixedFrequency"], log.time_s("fixedFrequency")
+        missing = [v for v in IMU_VARIABLES if v not in ff.dtype.names]
+        if missing:
+            raise InputError(f"fixedFrequency events lack {', '.join(missing)}", log_path)
+        columns = {"time": t_imu}
+        columns |= {f"a{k}": ff[f"acc.{k}"].astype(float) * STANDARD_GRAVITY for k in "xyz"}
+        columns |= {f"g{k}": np.radians(ff[f"gyro.{k}"].astype(float)) for k in "xyz"}
+        write_csv_columns(paths["imu"], columns, {"time": "{:.6f}"}, overwrite)
+        imu_rate = (len(t_imu) - 1) / (t_imu[-1] - t_imu[0]) if len(t_imu) > 1 else 0.0
+    else:
+        write_csv_columns(paths["imu"], {k: np.zeros(0) for k in
+                                         ("time", "ax", "ay", "az", "gx", "gy", "gz")}, {},
+                          overwrite)
+    if config is not None:
+        save_calibration(config.calibrations, paths["ootx"], overwrite)
+        save_stations(_stations(config), paths["stations-cfclient"], overwrite)
+    if aligned is not None:
+        write_csv_columns(paths["mocap"], {"time": aligned.time, "x": aligned.position[:, 0],
+                                           "y": aligned.position[:, 1],
+                                           "z": aligned.position[:, 2]},
+                          {"time": "{:.6f}"}, overwrite)
+    skipped = []
+    if config is None:
+        skipped.append("ootx.toml, stations-cfclient.toml (no --system-config)")
+    if mocap is None:
+        skipped.append("mocap.csv (no mocapNN.npy beside the log, no --mocap)")
+    return CrazyflieImport(paths, log.version, log.notes, sweeps,
+                           float(angles.time[-1] - angles.time[0]) if len(angles) else 0.0,
+                           float(imu_rate), aligned, tuple(skipped))

@@ -1,0 +1,107 @@
+"""The log's ``lhAngle`` events as an angles table (:func:`lh1_angles`), and the system type
+they come from (:func:`sweep_interval_s`).
+
+What the log holds (measured on the real LH1 log, docs/crazyflie.md): the deck firmware logs
+the latest angle pair (both sweeps) of every base station each time one station's pair
+completes, so a station's pair is often logged twice, the second time as an exact copy
+(``angle`` and ``correctedAngle`` bit-identical) next to the other station's fresh pair.
+These repeats are the "extra" sweeps of station 0; they are dropped, the first logging of
+each measurement is kept. After that every station and sweep arrives every 33.3 ms (30 Hz),
+as LH1 with two stations must.
+
+Hit time: the firmware logs a pair about :data:`LOG_LATENCY_S` after the laser crossed the
+diode on the pair's last sweep (axis 1, measured against the deck's raw ``lhUartFrame``
+pulses); axis 0 was swept one slot (:data:`SLOT_S`) before axis 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.importers.crazyflie.usdlog import UsdLog
+from lhgraph.io.angles import Angles
+
+SLOT_S = 1.0 / 120.0
+"""One LH1 sweep slot (half a rotor turn), s."""
+LOG_LATENCY_S = 4.3e-3
+"""Delay from the axis-1 laser hit to the ``lhAngle`` event (median on the real log)."""
+LH2_MAX_INTERVAL_S = 0.025
+"""LH1 sweeps a station's axis every 33.3 ms; LH2 rotors turn every 18.5-20 ms."""
+
+
+@dataclass(frozen=True)
+class SweepSummary:
+    """What :func:`lh1_angles` kept and dropped: per station, hits kept, exact repeats
+    dropped, non-finite angles dropped."""
+
+    kept: dict[int, int]
+    repeats: dict[int, int]
+    non_finite: int
+
+    def lines(self) -> list[str]:
+        """Human-readable lines for the import summary."""
+        st = sorted(set(self.kept) | set(self.repeats))
+        return [
+            "hits kept: " + ", ".join(f"station {s}: {self.kept.get(s, 0)}" for s in st),
+            "dropped repeated hits (an earlier pair logged again, bit-identical): "
+            + ", ".join(f"station {s}: {self.repeats.get(s, 0)}" for s in st),
+            f"dropped non-finite angles: {self.non_finite}",
+        ]
+
+
+def _angle_events(log: UsdLog) -> tuple[NDArray, NDArray[np.float64]]:
+    return log.events["lhAngle"], log.time_s("lhAngle")
+
+
+def repeated_hits(log: UsdLog) -> NDArray[np.bool_]:
+    """Per ``lhAngle`` event: True when it repeats the previous event of the same
+    (base station, sweep, sensor) bit for bit (angle and correctedAngle)."""
+    a, t = _angle_events(log)
+    order = np.lexsort((t, a["sensor"], a["sweep"], a["basestation"]))
+    s = a[order]
+    same = np.r_[False, (s["basestation"][1:] == s["basestation"][:-1])
+                 & (s["sweep"][1:] == s["sweep"][:-1]) & (s["sensor"][1:] == s["sensor"][:-1])
+                 & (s["angle"][1:] == s["angle"][:-1])
+                 & (s["correctedAngle"][1:] == s["correctedAngle"][:-1])]
+    out = np.zeros(len(a), dtype=bool)
+    out[order] = same
+    return out
+
+
+def sweep_interval_s(log: UsdLog) -> float:
+    """Median time (s) between new measurements of one station, sweep and sensor: ~0.033 on
+    LH1, ~0.019 on LH2 (nan without angles)."""
+    a, t = _angle_events(log)
+    new = ~repeated_hits(log)
+    key = (a["basestation"].astype(np.int64) * 2 + a["sweep"]) * 256 + a["sensor"]
+    key, t = key[new], t[new]
+    order = np.lexsort((t, key))
+    dt = np.diff(t[order])[np.diff(key[order]) == 0]
+    return float(np.median(dt)) if len(dt) else float("nan")
+
+
+def lh1_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
+    """The angles table of an LH1 log: station = the log's base-station index, axis = its
+    sweep (0 horizontal = azimuth, 1 vertical = elevation), ``angle`` as measured; extra
+    columns ``corrected_angle`` (the firmware's) and ``log_time`` (s, the event's stamp).
+    Repeats and non-finite angles are dropped and counted."""
+    a, t = _angle_events(log)
+    repeat = repeated_hits(log)
+    finite = np.isfinite(a["angle"]) & np.isfinite(a["correctedAngle"])
+    keep = ~repeat & finite
+    k = a[keep]
+    axis = k["sweep"].astype(np.int64)
+    time = t[keep] - LOG_LATENCY_S - (1 - axis) * SLOT_S
+    order = np.argsort(time, kind="stable")
+    station = k["basestation"].astype(np.int64)
+    angles = Angles(time[order], station[order], axis[order], k["sensor"].astype(np.int64)[order],
+                    k["angle"].astype(float)[order],
+                    {"corrected_angle": k["correctedAngle"].astype(float)[order],
+                     "log_time": t[keep][order]})
+    stations = np.unique(a["basestation"]).astype(int)
+    kept = {int(s): int(np.sum(station == s)) for s in stations}
+    repeats = {int(s): int(np.sum(repeat & (a["basestation"] == s))) for s in stations}
+    return angles, SweepSummary(kept, repeats, int(np.sum(~finite & ~repeat)))

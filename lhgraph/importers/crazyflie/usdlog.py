@@ -1,0 +1,228 @@
+"""The Crazyflie uSD-card event log: reader (:func:`read_usd_log`) and writer
+(:func:`encode_usd_log`, :func:`write_usd_log`).
+
+Layout (little-endian, docs/crazyflie.md): magic byte ``0xBC``, ``u16 version`` (1: event
+timestamps ``u32`` ms, 2: ``u64`` µs), ``u16 n_event_types``; per event type ``u16 id``, a
+NUL-terminated name, ``u16 n_vars`` and per variable a NUL-terminated ``name(T)`` with ``T``
+a :mod:`struct` type character; then events (``u16 id``, timestamp, the variables packed in
+header order, no padding) up to the last 4 bytes, the CRC-32 (zlib) of everything before.
+
+A damaged log keeps what is valid: events are read up to the first one that is cut short,
+has an unknown id or goes back in time, and :attr:`UsdLog.notes` says what was dropped.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.errors import InputError
+from lhgraph.io.files import write_atomic
+
+MAGIC = 0xBC
+TIMESTAMP_TYPE = {1: "<u4", 2: "<u8"}
+"""Event timestamp dtype per log version."""
+TIMESTAMP_UNIT_S = {1: 1e-3, 2: 1e-6}
+"""Seconds per timestamp tick per log version."""
+_VARIABLE = re.compile(r"^(.+)\(([bBhHiIqQefd?])\)$")
+
+
+@dataclass(frozen=True)
+class EventType:
+    """One event type of the header: ``id``, ``name`` and its variables as
+    ``(name, struct type character)`` pairs, in packing order."""
+
+    id: int
+    name: str
+    variables: tuple[tuple[str, str], ...]
+
+    def dtype(self, version: int) -> np.dtype:
+        """Packed numpy dtype of one event record (id, timestamp, variables)."""
+        return np.dtype([("id", "<u2"), ("timestamp", TIMESTAMP_TYPE[version])]
+                        + [(name, "<" + t) for name, t in self.variables])
+
+
+@dataclass(frozen=True)
+class UsdLog:
+    """A decoded log: ``events[name]`` is a structured array (fields ``timestamp`` in ticks
+    and the variables), ``order`` the type id of every kept event in file order, ``notes``
+    what the reader dropped (empty for an intact log)."""
+
+    version: int
+    types: tuple[EventType, ...]
+    events: dict[str, NDArray]
+    order: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    notes: tuple[str, ...] = ()
+
+    def time_s(self, name: str) -> NDArray[np.float64]:
+        """Timestamps (s, the log's clock) of the events called ``name``."""
+        return self.events[name]["timestamp"].astype(float) * TIMESTAMP_UNIT_S[self.version]
+
+    def count(self, name: str) -> int:
+        """Number of events called ``name`` (0 if the type is absent)."""
+        return len(self.events[name]) if name in self.events else 0
+
+
+def _cstring(data: bytes, pos: int, source: Path) -> tuple[str, int]:
+    end = data.find(b"\0", pos)
+    if end < 0:
+        raise InputError(f"header cut short at byte {pos}", source)
+    try:
+        return data[pos:end].decode("ascii"), end + 1
+    except UnicodeDecodeError:
+        raise InputError(f"header string at byte {pos} is not ASCII", source) from None
+
+
+def _u16(data: bytes, pos: int, source: Path) -> int:
+    if pos + 2 > len(data):
+        raise InputError(f"header cut short at byte {pos}", source)
+    return int.from_bytes(data[pos:pos + 2], "little")
+
+
+def _read_header(data: bytes, source: Path) -> tuple[int, tuple[EventType, ...], int]:
+    if len(data) < 5 or data[0] != MAGIC:
+        first = f"0x{data[0]:02X}" if data else "nothing"
+        raise InputError(f"not a Crazyflie uSD log (starts with {first}, expected 0xBC)", source)
+    version, n_types = _u16(data, 1, source), _u16(data, 3, source)
+    if version not in TIMESTAMP_TYPE:
+        raise InputError(f"uSD log version {version} is not supported (1 or 2)", source)
+    pos, types = 5, []
+    for _ in range(n_types):
+        type_id = _u16(data, pos, source)
+        name, pos = _cstring(data, pos + 2, source)
+        n_vars = _u16(data, pos, source)
+        pos += 2
+        variables = []
+        for _ in range(n_vars):
+            spec, pos = _cstring(data, pos, source)
+            m = _VARIABLE.match(spec)
+            if m is None:
+                raise InputError(f"event {name!r}: variable {spec!r} is not 'name(T)'", source)
+            variables.append((m.group(1), m.group(2)))
+        types.append(EventType(type_id, name, tuple(variables)))
+    if len({t.id for t in types}) != len(types):
+        raise InputError("header lists an event id twice", source)
+    return version, tuple(types), pos
+
+
+def _scan(data: bytes, start: int, end: int, sizes: dict[int, int]
+          ) -> tuple[list[int], list[int], int, str]:
+    """Offsets and ids of the whole events in ``data[start:end]``; the byte where reading
+    stopped and why (empty when it reached ``end``)."""
+    offsets, ids, pos = [], [], start
+    while pos < end:
+        if pos + 2 > end:
+            return offsets, ids, pos, "a cut-short last event"
+        type_id = data[pos] | (data[pos + 1] << 8)
+        size = sizes.get(type_id)
+        if size is None:
+            return offsets, ids, pos, f"unknown event id {type_id}"
+        if pos + size > end:
+            return offsets, ids, pos, "a cut-short last event"
+        offsets.append(pos)
+        ids.append(type_id)
+        pos += size
+    return offsets, ids, pos, ""
+
+
+def read_usd_log(path: str | Path) -> UsdLog:
+    """Read a uSD event log (see module); InputError if the file is not one."""
+    source = Path(path)
+    try:
+        data = source.read_bytes()
+    except FileNotFoundError:
+        raise InputError("file not found", source) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a uSD log", source) from None
+    version, types, start = _read_header(data, source)
+    by_id = {t.id: t for t in types}
+    sizes = {t.id: t.dtype(version).itemsize for t in types}
+    crc_ok = len(data) >= start + 4 and (
+        zlib.crc32(data[:-4]) == int.from_bytes(data[-4:], "little"))
+    end = len(data) - 4 if crc_ok else len(data)
+    offsets, ids, stop, why = _scan(data, start, end, sizes)
+    notes = []
+    if not crc_ok:
+        notes.append("CRC mismatch (log truncated or corrupted)")
+    # The timestamps of one event type never go back (types interleave slightly out of
+    # order); the first event that does marks damage.
+    ts_dtype = np.dtype(TIMESTAMP_TYPE[version])
+    buf = np.frombuffer(data, dtype=np.uint8)
+    off = np.asarray(offsets, dtype=np.int64)
+    ids_arr = np.asarray(ids, dtype=np.int64)
+    ts = buf[(off[:, None] + 2 + np.arange(ts_dtype.itemsize)).ravel()].copy().view(ts_dtype)
+    back = []
+    for type_id in by_id:
+        at = np.flatnonzero(ids_arr == type_id)
+        back += list(at[1:][np.diff(ts[at].astype(np.int64)) < 0][:1])
+    if back:
+        n_keep = int(min(back))
+        stop, why = int(off[n_keep]), "an event going back in time"
+        off, ids_arr = off[:n_keep], ids_arr[:n_keep]
+    if why:
+        tail = len(data) - stop - (0 if not crc_ok else 4)
+        if not crc_ok and why == "a cut-short last event":
+            notes.append(f"kept {len(off)} events; dropped the last {len(data) - stop} bytes "
+                         f"from byte {stop} ({why}, the CRC is missing)")
+        else:
+            notes.append(f"kept {len(off)} events; dropped events after byte {stop} ({why}, "
+                         f"{tail} bytes)")
+    elif not crc_ok:
+        # Read to the very end without a CRC: the last 4 bytes were event data, unless they
+        # are exactly a damaged CRC; events parse cleanly, so the damage is inside values.
+        notes.append(f"kept all {len(off)} events (their values are not verified)")
+    events = {}
+    for type_id, t in by_id.items():
+        rows = off[ids_arr == type_id]
+        dt = t.dtype(version)
+        raw = buf[(rows[:, None] + np.arange(dt.itemsize)).ravel()].copy()
+        events[t.name] = raw.view(dt)
+    return UsdLog(version, types, events, ids_arr, tuple(notes))
+
+
+def encode_usd_log(log: UsdLog) -> bytes:
+    """The bytes of a uSD log (header, events, CRC-32). Events are written in ``log.order``
+    when it lists every event, else merged by timestamp (stable, header order on ties)."""
+    if log.version not in TIMESTAMP_TYPE:
+        raise InputError(f"uSD log version {log.version} is not supported (1 or 2)")
+    head = [struct.pack("<BHH", MAGIC, log.version, len(log.types))]
+    for t in log.types:
+        head.append(struct.pack("<H", t.id) + t.name.encode("ascii") + b"\0"
+                    + struct.pack("<H", len(t.variables)))
+        head += [f"{name}({code})".encode("ascii") + b"\0" for name, code in t.variables]
+    records, type_ids, times = [], [], []
+    for t in log.types:
+        ev = log.events.get(t.name)
+        n = 0 if ev is None else len(ev)
+        packed = np.zeros(n, dtype=t.dtype(log.version))
+        for name in packed.dtype.names:
+            if name != "id":
+                packed[name] = ev[name]
+        packed["id"] = t.id
+        records.append(packed)
+        type_ids.append(np.full(n, t.id))
+        times.append(packed["timestamp"].astype(np.int64))
+    ids = np.concatenate(type_ids) if type_ids else np.zeros(0, dtype=np.int64)
+    if len(log.order) == len(ids):
+        sequence = [np.flatnonzero(np.asarray(log.order) == t.id) for t in log.types]
+        order = np.argsort(np.concatenate(sequence), kind="stable")
+    else:
+        order = np.argsort(np.concatenate(times), kind="stable")
+    blobs = [r.tobytes() for r in records]
+    sizes = np.concatenate([np.full(len(r), r.dtype.itemsize) for r in records])
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    flat = b"".join(blobs)
+    body = b"".join(flat[s:s + n] for s, n in zip(starts[order], sizes[order], strict=True))
+    data = b"".join(head) + body
+    return data + struct.pack("<I", zlib.crc32(data))
+
+
+def write_usd_log(log: UsdLog, path: str | Path, overwrite: bool = False) -> Path:
+    """Write ``log`` as a uSD event log file (:func:`encode_usd_log`), atomically."""
+    return write_atomic(path, encode_usd_log(log), overwrite)
