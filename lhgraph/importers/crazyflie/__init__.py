@@ -3,11 +3,10 @@ files.
 
 :mod:`~lhgraph.importers.crazyflie.usdlog` reads and writes the log format,
 :mod:`~lhgraph.importers.crazyflie.sweeps` turns its ``lhAngle`` events into angles (the
-repeated pairs dropped), :mod:`~lhgraph.importers.crazyflie.systemconfig` reads cfclient's
-system configuration (conventions in :mod:`lhgraph.model.bitcraze`),
-:mod:`~lhgraph.importers.crazyflie.mocap` puts the Qualisys recording on the log's clock and
-:mod:`~lhgraph.importers.crazyflie.convert` writes the files (``lhgraph import crazyflie``).
-See docs/crazyflie.md.
+repeated pairs dropped), :mod:`~lhgraph.importers.crazyflie.mocap` puts the Qualisys
+recording on the log's clock and :mod:`~lhgraph.importers.crazyflie.convert` writes the
+files (``lhgraph import crazyflie``; cfclient's system configuration is read by
+:mod:`lhgraph.io.cfclient`). See docs/crazyflie.md.
 """
 
 from lhgraph.importers.crazyflie.convert import CrazyflieImport, import_crazyflie

@@ -25,9 +25,9 @@ from lhgraph.importers.crazyflie.sweeps import (
     lh1_angles,
     sweep_interval_s,
 )
-from lhgraph.importers.crazyflie.systemconfig import LH2_ISSUE, SystemConfig, read_system_config
 from lhgraph.importers.crazyflie.usdlog import UsdLog, read_usd_log
 from lhgraph.io.angles import save_angles
+from lhgraph.io.cfclient import LH2_PENDING, SystemConfig, read_system_config
 from lhgraph.io.files import check_writable, write_csv_columns
 from lhgraph.io.stations import Station, Stations, save_stations
 from lhgraph.model.board import save_board
@@ -82,7 +82,7 @@ def check_lh1(log: UsdLog, source: str | Path) -> None:
     interval = sweep_interval_s(log)
     if interval < LH2_MAX_INTERVAL_S:
         raise InputError(f"an LH2 log (a station's sweeps every {interval * 1e3:.1f} ms, LH1: "
-                         f"33.3 ms): {LH2_ISSUE}", source)
+                         f"33.3 ms): {LH2_PENDING}", source)
 
 
 def _stations(config: SystemConfig) -> Stations:
