@@ -12,15 +12,21 @@ The document (Bitcraze's cfclient and cflib read and write it; docs/export.md):
   reproduce the firmware's own ``lhCrossingBeam`` positions (docs/export.md);
 - ``calibs.<bs>``: ``sweeps`` (two tables, sweep 0 and 1, with ``phase, tilt, curve,
   gibmag, gibphase, ogeemag, ogeephase`` in Bitcraze's convention) and ``uid`` (the
-  station's 32-bit id). The mapping to our model's terms lives in
-  :mod:`lhgraph.model.bitcraze`.
+  station's 32-bit id).
 
-``<bs>`` is the base-station index (an integer key), the station index of our files.
+:func:`read_system_config` and :func:`write_system_config` work in our types
+(:class:`SystemConfig`: ``T_world_lh`` and our model's factory calibration); the mapping of
+the calibration terms between Bitcraze's convention and ours lives in
+:mod:`lhgraph.model.bitcraze` only. ``<bs>`` is the base-station index (an integer key), the
+station index of our files. Only LH1 (systemType 1) has a calibration mapping so far: LH2
+files are refused in one line until issue #15 registers its mapping in
+:data:`CALIBRATION_MAPPINGS`.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,34 +37,40 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.io.files import write_atomic
+from lhgraph.model.bitcraze import (
+    calibration_from_bitcraze,
+    calibration_to_bitcraze,
+    pose_from_bitcraze,
+    pose_to_bitcraze,
+)
+from lhgraph.model.calibration import StationCalibration
+from lhgraph.model.lh1 import FactoryCalibration
 
 Array = NDArray[np.float64]
+CalibrationMapping = tuple[Callable[[Sequence[dict[str, float]], str], FactoryCalibration],
+                Callable[[FactoryCalibration], list[dict[str, float]]]]
 
 FILE_TYPE = "lighthouse_system_configuration"
 FILE_VERSION = "1"
 SYSTEM_TYPES = {1: "LH1", 2: "LH2"}
-SWEEP_KEYS = ("phase", "tilt", "curve", "gibmag", "gibphase", "ogeemag", "ogeephase")
+CALIBRATION_MAPPINGS: dict[int, CalibrationMapping] = {
+    1: (calibration_from_bitcraze, calibration_to_bitcraze),
+}
+"""Per system type, Bitcraze's calibration terms -> ours and back (LH2 joins with #15)."""
+LH2_PENDING = "LH2 systems come with issue #15"
 MAX_ORTHONORMAL_ERROR = 1e-3
 """A rotation is accepted when ``|R^T R - I|`` stays below this (float32 files reach 1e-7)."""
 
 
 @dataclass(frozen=True)
-class BitcrazeCalibration:
-    """One ``calibs.<bs>`` entry: ``sweeps[k][key]`` (rad, Bitcraze's convention, for
-    ``key`` in :data:`SWEEP_KEYS`) and the station's ``uid``."""
-
-    sweeps: tuple[dict[str, float], dict[str, float]]
-    uid: int = 0
-
-
-@dataclass(frozen=True)
 class SystemConfig:
-    """A cfclient system configuration: ``system_type`` (1 = LH1, 2 = LH2), the station
-    poses ``T_world_lh`` (4x4 per base-station index) and the factory calibrations."""
+    """A cfclient system configuration in our types: ``system_type`` (1 = LH1, 2 = LH2),
+    the station poses ``T_world_lh`` (4x4) and the factory calibrations (our model's terms;
+    ``id`` is Bitcraze's ``uid``), keyed by base-station index."""
 
     system_type: int = 1
     T_world_lh: dict[int, Array] = field(default_factory=dict)
-    calibrations: dict[int, BitcrazeCalibration] = field(default_factory=dict)
+    calibrations: dict[int, StationCalibration] = field(default_factory=dict)
 
 
 def _floats(value: Any, n: int, source: Path, where: str) -> list[float]:
@@ -102,30 +114,35 @@ def _geometry(value: Any, source: Path, where: str) -> Array:
                          f"{where}.rotation")
     R = np.array([_floats(r, 3, source, f"{where}.rotation") for r in rows])
     check_rotation(R, source, f"{where}.rotation")
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, origin
-    return T
+    return pose_from_bitcraze(origin, R)
 
 
-def _calibration(value: Any, source: Path, where: str) -> BitcrazeCalibration:
+def _calibration(value: Any, system_type: int, source: Path, where: str) -> StationCalibration:
     calib = _table(value, source, where)
     sweeps = calib.get("sweeps")
     if not isinstance(sweeps, list) or len(sweeps) != 2:
         raise InputError(f"'sweeps' must be a list of 2 tables, got {sweeps!r}", source, where)
-    out = []
     for k, sweep in enumerate(sweeps):
-        at = f"{where}.sweeps[{k}]"
-        sweep = _table(sweep, source, at)
-        missing = [key for key in SWEEP_KEYS if key not in sweep]
-        if missing:
-            raise InputError(f"missing key(s) {', '.join(missing)}", source, at)
-        out.append({key: _floats([sweep[key]], 1, source, f"{at}.{key}")[0]
-                    for key in SWEEP_KEYS})
+        for key, v in _table(sweep, source, f"{where}.sweeps[{k}]").items():
+            _floats([v], 1, source, f"{where}.sweeps[{k}].{key}")
     uid = calib.get("uid", 0)
     if isinstance(uid, bool) or not isinstance(uid, int) or not 0 <= uid < 2**32:
         raise InputError(f"uid must be an unsigned 32-bit integer, got {uid!r}", source,
                          f"{where}.uid")
-    return BitcrazeCalibration((out[0], out[1]), uid)
+    from_bitcraze = _mapping(system_type, source)[0]
+    return StationCalibration(from_bitcraze(sweeps, f"{source}:{where}"), uid)
+
+
+def _mapping(system_type: int, source: str | Path | None) -> CalibrationMapping:
+    """The calibration mapping of ``system_type``; InputError for an unknown or not yet
+    supported one."""
+    if system_type not in SYSTEM_TYPES:
+        raise InputError(f"systemType must be 1 (LH1) or 2 (LH2), got {system_type!r}", source,
+                         "systemType")
+    if system_type not in CALIBRATION_MAPPINGS:
+        raise InputError(f"an {SYSTEM_TYPES[system_type]} system (systemType {system_type}): "
+                         f"{LH2_PENDING}", source, "systemType")
+    return CALIBRATION_MAPPINGS[system_type]
 
 
 def read_system_config(path: str | Path) -> SystemConfig:
@@ -149,36 +166,31 @@ def read_system_config(path: str | Path) -> SystemConfig:
         raise InputError(f"unsupported version {data.get('version')!r} (expected "
                          f"'{FILE_VERSION}')", path, "version")
     system_type = data.get("systemType", 2)  # cflib's default when the key is absent
-    if system_type not in SYSTEM_TYPES:
-        raise InputError(f"systemType must be 1 (LH1) or 2 (LH2), got {system_type!r}", path,
-                         "systemType")
+    _mapping(system_type, path)
     geos = {_index(k, path, f"geos.{k}"): _geometry(v, path, f"geos.{k}")
             for k, v in _table(data.get("geos") or {}, path, "geos").items()}
-    calibs = {_index(k, path, f"calibs.{k}"): _calibration(v, path, f"calibs.{k}")
+    calibs = {_index(k, path, f"calibs.{k}"): _calibration(v, system_type, path, f"calibs.{k}")
               for k, v in _table(data.get("calibs") or {}, path, "calibs").items()}
     return SystemConfig(int(system_type), geos, calibs)
 
 
 def system_config_document(config: SystemConfig) -> dict[str, Any]:
     """The YAML document of ``config`` as plain Python values (checked: proper rotations,
-    a known system type, 32-bit uids)."""
-    if config.system_type not in SYSTEM_TYPES:
-        raise InputError(f"systemType must be 1 (LH1) or 2 (LH2), got {config.system_type!r}")
+    a supported system type, 32-bit uids)."""
+    to_bitcraze = _mapping(config.system_type, None)[1]
     geos = {}
     for k in sorted(config.T_world_lh):
         T = np.asarray(config.T_world_lh[k], dtype=float)
         check_rotation(T[:3, :3], None, f"station {k}")
-        geos[int(k)] = {"origin": [float(v) for v in T[:3, 3]],
-                        "rotation": [[float(v) for v in row] for row in T[:3, :3]]}
+        origin, rotation = pose_to_bitcraze(T)
+        geos[int(k)] = {"origin": origin, "rotation": rotation}
     calibs = {}
     for k in sorted(config.calibrations):
         c = config.calibrations[k]
-        if not 0 <= c.uid < 2**32:
-            raise InputError(f"uid {c.uid} is not an unsigned 32-bit integer", None,
-                             f"station {k}")
-        calibs[int(k)] = {"sweeps": [{key: float(s[key]) for key in SWEEP_KEYS}
-                                     for s in c.sweeps],
-                          "uid": int(c.uid)}
+        if not 0 <= c.id < 2**32:
+            raise InputError(f"id {c.id} is not an unsigned 32-bit integer (Bitcraze's uid)",
+                             None, f"station {k}")
+        calibs[int(k)] = {"sweeps": to_bitcraze(c.calibration), "uid": int(c.id)}
     return {"type": FILE_TYPE, "version": FILE_VERSION, "systemType": int(config.system_type),
             "geos": geos, "calibs": calibs}
 
