@@ -11,6 +11,7 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 
+from lhgraph.choices import FORMATS, PERIODS, RENDERERS, SYNCS
 from lhgraph.errors import LhgraphError
 
 Runner = Callable[[argparse.Namespace], int]
@@ -70,7 +71,7 @@ COMMANDS.append(("simulate", add_simulate, run_simulate))
 
 
 def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    from lhgraph.workflow.solve_config import METHODS, WORLDS
+    from lhgraph.choices import METHODS, WORLDS
 
     p = sub.add_parser("solve", help="calibrate the station poses",
                        description="Calibrate the stations' poses from a board capture's angles "
@@ -153,15 +154,15 @@ def add_decode(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        "(docs/decoding.md).")
     p.add_argument("capture", help="capture file")
     p.add_argument("--output", "-o", required=True, help="output directory")
-    p.add_argument("--format", help="input format, checked by the decoder (the kinds: "
-                   "docs/decoding.md; default: from the file name)")
+    p.add_argument("--format", choices=FORMATS,
+                   help="input format (docs/decoding.md; default: from the file name)")
     p.add_argument("--device", help="libsurvive device name (e.g. HMD)")
     p.add_argument("--board", help="board TOML: drop pulses of sensors not on it")
     p.add_argument("--sample-rate", type=float, help="raw dump sample rate in Hz (2e6)")
-    p.add_argument("--period", choices=("fit", "nominal"),
+    p.add_argument("--period", choices=PERIODS,
                    help="rotor period: fitted to the sync train or 1/60 s (default: fit; "
                    "nominal for libsurvive recordings)")
-    p.add_argument("--sync", choices=("measured", "fitted"), default="measured",
+    p.add_argument("--sync", choices=SYNCS, default="measured",
                    help="time sweeps from each measured sync flash or from the fitted train")
     _add_common_output(p)
     return p
@@ -344,7 +345,7 @@ def add_view(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        "display (docs/workflow.md).")
     p.add_argument("run_dir", help="run directory (or one method's subdirectory)")
     p.add_argument("--export", help="write FILE.png, .ply, .glb, .gltf or .obj instead")
-    p.add_argument("--renderer", choices=("auto", "open3d", "matplotlib"), default="auto",
+    p.add_argument("--renderer", choices=RENDERERS, default="auto",
                    help="PNG renderer (default: Open3D offscreen, else matplotlib)")
     _add_common_output(p)
     return p
@@ -364,6 +365,72 @@ def run_view(args: argparse.Namespace) -> int:
 
 
 COMMANDS.append(("view", add_view, run_view))
+
+
+# --- export ---
+# ``lhgraph export TARGET ...``: one sub-subcommand per foreign configuration format.
+
+
+def _add_export_cfclient(sub: argparse._SubParsersAction) -> None:
+    from lhgraph.choices import EXPORT_FRAMES, EXPORT_IMU_SAMPLES, EXPORT_UP
+
+    p = sub.add_parser("cfclient", help="Bitcraze cfclient's system-config.yaml (Crazyflie)",
+                       description="Write the stations and their factory calibration as "
+                       "cfclient's Lighthouse system configuration, in a world with z up from "
+                       "gravity and the origin and x axis chosen by name (docs/export.md).")
+    p.add_argument("stations", help="stations TOML (LH1)")
+    p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
+    p.add_argument("--output", "-o", required=True, help="system-config.yaml to write")
+    p.add_argument("--up", choices=EXPORT_UP, default="auto",
+                   help="where up comes from (default auto: imu if --imu, else ootx if the "
+                   "calibration has accelerometer vectors, else none)")
+    p.add_argument("--imu", help="the receiver's imu.csv (board frame, SI units)")
+    p.add_argument("--trajectory", help="the receiver's trajectory CSV in the stations' world "
+                   "(lhgraph solve --trajectory, lhgraph track)")
+    p.add_argument("--imu-samples", choices=EXPORT_IMU_SAMPLES, default="auto",
+                   help="IMU samples averaged: at rest, all, or auto (still if >= 1 s of them)")
+    p.add_argument("--origin", choices=EXPORT_FRAMES, default="auto",
+                   help="world origin (default auto: receiver-start with --trajectory, else "
+                   "reference-station)")
+    p.add_argument("--x", choices=EXPORT_FRAMES, default="auto",
+                   help="whose x axis, made horizontal, is the world's +x (default as --origin)")
+    p.add_argument("--at", type=float, metavar="S", help="time (s) of the receiver pose for "
+                   "receiver-start (default: the trajectory's first state)")
+    _add_common_output(p)
+    p.set_defaults(_export=_run_export_cfclient)
+
+
+def _run_export_cfclient(args: argparse.Namespace) -> int:
+    from lhgraph.config import override
+    from lhgraph.estimation.world_alignment import WorldOptions
+    from lhgraph.workflow.export import export_cfclient
+
+    options = override(WorldOptions(), {
+        "--up": ("up", args.up), "--origin": ("origin", args.origin), "--x": ("x", args.x),
+        "--at": ("at_s", args.at), "--imu-samples": ("imu_samples", args.imu_samples)})
+    result = export_cfclient(args.stations, args.output, calibration=args.calibration,
+                             imu=args.imu, trajectory=args.trajectory, options=options,
+                             overwrite=args.force)
+    for warning in result.warnings:
+        print(f"lhgraph export: warning: {warning}", file=sys.stderr)
+    if not args.quiet:
+        print(result.summary())
+    return 0
+
+
+def add_export(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("export", help="write the stations for other software",
+                       description="Write a stations TOML in another tool's format.")
+    targets = p.add_subparsers(dest="target", required=True, metavar="TARGET")
+    _add_export_cfclient(targets)
+    return p
+
+
+def run_export(args: argparse.Namespace) -> int:
+    return int(args._export(args))
+
+
+COMMANDS.append(("export", add_export, run_export))
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from lhgraph.choices import PERIODS, SYNCS
 from lhgraph.errors import InputError
 from lhgraph.io.angles import Angles
 from lhgraph.model.board import Board
@@ -70,9 +71,9 @@ class DecodeOptions:
     max_pulses_per_sweep: int = 4
 
     def __post_init__(self) -> None:
-        if self.period not in ("fit", "nominal"):
+        if self.period not in PERIODS:
             raise InputError(f"period must be 'fit' or 'nominal', got {self.period!r}")
-        if self.sync_reference not in ("measured", "fitted"):
+        if self.sync_reference not in SYNCS:
             raise InputError("sync_reference must be 'measured' or 'fitted', got "
                              f"{self.sync_reference!r}")
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from lhgraph.choices import FORMATS
 from lhgraph.errors import InputError
 from lhgraph.io.angles import save_angles
 from lhgraph.io.files import check_writable
@@ -19,7 +20,6 @@ from lhgraph.signal.capture import read_capture, read_raw_dump
 from lhgraph.signal.decode import DecodeOptions, DecodeResult, decode_capture, decode_pulses
 from lhgraph.signal.libsurvive import read_libsurvive
 
-FORMATS = ("lhcap", "raw", "libsurvive")
 ANGLES_FILE = "angles.csv"
 OOTX_FILE = "ootx.toml"
 RAW_SAMPLE_RATE_HZ = 2_000_000

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from lhgraph.choices import METHODS
 from lhgraph.errors import InputError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
@@ -30,7 +31,7 @@ from lhgraph.io.trajectory import save_trajectory
 from lhgraph.model.board import Board
 from lhgraph.model.lh1 import StationModel
 from lhgraph.workflow.inputs import check_inputs, load_inputs
-from lhgraph.workflow.solve_config import METHODS, SolveConfig
+from lhgraph.workflow.solve_config import SolveConfig
 
 if TYPE_CHECKING:
     from lhgraph.estimation.baseline import PaperOptions

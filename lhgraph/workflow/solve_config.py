@@ -10,13 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lhgraph.choices import METHODS, WORLDS
 from lhgraph.config import Table, check_fields, option, rules
 from lhgraph.errors import InputError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.io.files import read_toml
-
-METHODS = ("graph", "paper")
-WORLDS = ("reference", "gravity")
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from lhgraph.choices import METHODS
 from lhgraph.config import Table, check_fields, option, rules
 from lhgraph.errors import InputError, LhgraphError
 from lhgraph.estimation.graph.options import GraphOptions
@@ -33,7 +34,7 @@ from lhgraph.io.files import read_toml, write_atomic
 from lhgraph.io.stations import Stations
 from lhgraph.sim.simulate import SimulationConfig, paper_protocol, simulate
 from lhgraph.workflow.solve import solve
-from lhgraph.workflow.solve_config import METHODS, check_methods
+from lhgraph.workflow.solve_config import check_methods
 
 COLUMNS = ["X (mm)", "Y (mm)", "Z (mm)", "alpha (deg)", "beta (deg)", "gamma (deg)"]
 PAPER_MAE = [6.9, 9.3, 8.5, 0.10, 0.17, 0.16]

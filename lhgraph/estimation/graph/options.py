@@ -2,16 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
-import numpy as np
-from numpy.typing import NDArray
-
 from lhgraph.config import check_fields, option
-
-Array = NDArray[np.float64]
-Progress = Callable[[str], None]
 
 LOSSES = ("cauchy", "huber")
 SOLVERS = ("lm", "isam2")
