@@ -1,0 +1,237 @@
+"""Tracking: the receiver's path with every station held fixed at a known pose (what a lab
+does with a calibration), batch: :func:`track`.
+
+The graph is the calibration's (:func:`lhgraph.estimation.graph.factors.build_graph` with
+``T_world_lh``: one bearing factor per sweep, the sweep-offset priors, the motion prior), with
+no station variable; Levenberg-Marquardt and the noise adaptation as in
+:func:`lhgraph.estimation.graph.solver.solve_graph`. Initial values: each station's PnP path
+(:func:`lhgraph.estimation.init.pnp_kabsch.station_paths`) put into the world by the known
+``T_world_lh`` and merged by time (:func:`~lhgraph.estimation.init.pnp_kabsch.world_states`).
+A receiver with few diodes (the Crazyflie deck: 4, of which a sweep holds ~3) has a PnP pose
+only where one azimuth/elevation pair saw every diode; the states between are interpolated
+(and the ends held), and the graph, bearings and motion prior, does the rest. Each state's
+position standard deviation ``sigma_m`` (from the marginal covariance) says how well its
+sweep and its neighbours determine it: where the receiver went unseen for long, the path is
+the motion prior's bridge and ``sigma_m`` grows.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import partial
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.errors import SolverError
+from lhgraph.estimation.graph.factors import build_graph
+from lhgraph.estimation.graph.noise import NoiseAdaptation
+from lhgraph.estimation.graph.optimizer import LMParams, OptimizerResult, levenberg_marquardt
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.variables import BOARD_POSE, initial_values
+from lhgraph.estimation.init.pnp import board_poses
+from lhgraph.estimation.init.pnp_kabsch import (
+    Initialisation,
+    PoseSolver,
+    station_paths,
+    world_states,
+)
+from lhgraph.estimation.problem import GraphProblem, build_problem
+from lhgraph.estimation.residuals import BearingHits, bearing_residuals
+from lhgraph.geometry.transforms import se3_exp
+from lhgraph.io.angles import Angles
+from lhgraph.io.stations import Stations
+from lhgraph.io.trajectory import Trajectory
+from lhgraph.model.board import Board
+from lhgraph.model.lh1 import StationModel
+
+Array = NDArray[np.float64]
+Progress = Callable[[str], None]
+PNP_MIN_SENSORS = 5
+"""Sensors a PnP pose needs on both axes (fewer on a board with fewer: the deck's 4)."""
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    """The tracked path: ``trajectory`` (``T_world_board`` per state, one state per sweep, in
+    the stations' world), per state the sweeping station's index ``lighthouse``, the diodes it
+    hit ``hits`` and the position standard deviation ``sigma_m`` (m, the largest axis of the
+    marginal position covariance); ``initialised`` = PnP poses the start was made of; the
+    optimiser's status and iterations; timings (s); the learned noise levels."""
+
+    trajectory: Trajectory
+    lighthouse: NDArray[np.int64]
+    hits: NDArray[np.int64]
+    sigma_m: Array
+    initialised: int
+    status: str
+    iterations: int
+    timings_s: dict[str, float] = field(default_factory=dict)
+    diagnostics: dict[str, float] = field(default_factory=dict)
+
+    def columns(self) -> dict[str, NDArray]:
+        """The trajectory CSV's added columns, in order."""
+        return {"lighthouse": self.lighthouse, "hits": self.hits, "sigma_m": self.sigma_m}
+
+
+def station_slot_poses(stations: Stations, station_ids: list[int]) -> Array:
+    """``T_world_lh`` (S, 4, 4) of ``station_ids`` in order; SolverError naming the stations
+    seen in the angles that ``stations`` does not hold."""
+    missing = [s for s in station_ids if s not in stations.stations]
+    if missing:
+        raise SolverError(f"station(s) {missing} seen in the angles but not in the stations "
+                          f"(which hold {stations.indices()})")
+    return np.stack([stations.pose(s) for s in station_ids])
+
+
+def tracking_problem(board: Board, angles: Angles, stations: Stations,
+                     models: dict[int, StationModel] | None = None
+                     ) -> tuple[GraphProblem, Array]:
+    """The graph problem of ``angles`` (slots = the stations seen, in index order) and the
+    fixed ``T_world_lh`` (S, 4, 4) of its slots. Station models: ``models`` where given, else
+    the stations file's own."""
+    ids = angles.stations()
+    T_world_lh = station_slot_poses(stations, ids)
+    merged = {s: stations.stations[s].model for s in ids} | dict(models or {})
+    return build_problem(board, angles, merged, ids[0], ids), T_world_lh
+
+
+def mean_rotation(R: Array) -> Array:
+    """The chordal mean (3, 3) of rotations ``R`` (n, 3, 3)."""
+    U, _, Vt = np.linalg.svd(R.sum(axis=0))
+    return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+
+
+def initial_path(board: Board, angles: Angles, problem: GraphProblem, T_world_lh: Array,
+                 pose_solver: PoseSolver | None = None, max_pnp_gap_s: float = 0.02
+                 ) -> tuple[Initialisation, int]:
+    """Initial board poses and twists at the problem's states, and how many PnP poses they
+    rest on: every station's PnP path in the known world, merged by time and interpolated
+    (on a board with fewer than :data:`PNP_MIN_SENSORS` diodes every state at the PnP poses'
+    mean rotation), then the position of each state more than ``max_pnp_gap_s`` from any
+    PnP pose from the bearings around it (:func:`snapshot_poses`)."""
+    solver = pose_solver or partial(board_poses,
+                                    min_sensors=min(PNP_MIN_SENSORS, len(board.positions)))
+    paths = station_paths(board, angles, problem, solver)
+    n = sum(len(p[0]) for p in paths)
+    if n == 0:
+        raise SolverError(f"no azimuth/elevation pair of any station saw enough of the "
+                          f"board's {len(board.positions)} diodes for a pose: cannot start "
+                          "the path")
+    t = problem.state_time
+    X0, V0 = world_states(paths, T_world_lh, t)
+    if len(board.positions) < PNP_MIN_SENSORS:
+        # a 4-point pose's rotation is often its mirror twin, and interpolated across
+        # seconds it is a guess: start every state at the mean rotation (the bearings and
+        # the motion prior turn it)
+        X0[:, :3, :3] = mean_rotation(np.concatenate(
+            [T_world_lh[slot, :3, :3] @ p[1][:, :3, :3] for slot, p in enumerate(paths)]))
+    # states without a PnP pose near them: position from the bearings around them
+    t_pnp = np.sort(np.concatenate([p[0] for p in paths]))
+    i = np.searchsorted(t_pnp, t)
+    near = np.minimum(np.abs(t - t_pnp[np.maximum(i - 1, 0)]),
+                      np.abs(t_pnp[np.minimum(i, len(t_pnp) - 1)] - t))
+    X0 = snapshot_poses(problem, X0, V0, T_world_lh, np.flatnonzero(near > max_pnp_gap_s))
+    V0 = world_states([(problem.state_time, X0, None)], np.eye(4)[None], problem.state_time)[1]
+    return Initialisation(T_world_lh, X0, V0), n
+
+
+def _window_hits(problem: GraphProblem, states: NDArray[np.int64], window_s: float
+                 ) -> BearingHits:
+    """For each of ``states`` (j-th: state j of the result), the hits of every state within
+    ``window_s`` of it, as hits of that state (``dt`` from its time)."""
+    t = problem.state_time
+    lo = np.searchsorted(t, t[states] - window_s, side="left")
+    hi = np.searchsorted(t, t[states] + window_s, side="right")
+    first = problem.bounds[lo]
+    count = problem.bounds[hi] - first
+    state = np.repeat(np.arange(len(states)), count)
+    rows = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + first[state]
+    h = problem.hits
+    return BearingHits(state, h.station[rows], h.s_board[rows], h.axis[rows],
+                       t[h.state[rows]] + h.dt[rows] - t[states][state], h.angle[rows])
+
+
+def _sum_by_state(state: NDArray[np.int64], x: Array, K: int) -> Array:
+    """Sums (K, ...) of the rows of ``x`` (n, ...) by ``state``."""
+    flat = x.reshape(len(x), -1)
+    out = np.stack([np.bincount(state, flat[:, j], K) for j in range(flat.shape[1])], axis=1)
+    return out.reshape((K,) + x.shape[1:])
+
+
+def snapshot_poses(problem: GraphProblem, X: Array, V: Array, T_world_lh: Array,
+                   states: NDArray[np.int64], window_s: float = 0.02, iterations: int = 8
+                   ) -> Array:
+    """Board poses ``T_world_board`` (K, 4, 4) with the positions of ``states`` refined, each
+    on its own, from ``X`` by damped Gauss-Newton on the bearings of every hit within
+    ``window_s`` of it (both stations, both axes: what a few-diode receiver gives in about one
+    sync cycle), moved by the twists ``V``, Cauchy-weighted; rotations kept; a state its
+    window does not determine stays near its start. Vectorised over the states."""
+    hits = _window_hits(problem, states, window_s)
+    K = len(states)
+    X = X.copy()
+    if K == 0:
+        return X
+    for _ in range(iterations):
+        r, H, _, _ = bearing_residuals(hits, X[states], V[states], T_world_lh, problem.models)
+        scale = max(3.0 * 1.4826 * float(np.median(np.abs(r))), 1e-4)
+        w = 1.0 / (1.0 + (r / scale) ** 2)
+        H = H[:, 3:]  # position only: a few diodes leave the rotation barely determined
+        A = _sum_by_state(hits.state, w[:, None, None] * H[:, :, None] * H[:, None, :], K)
+        b = _sum_by_state(hits.state, (w * r)[:, None] * H, K)
+        damping = 1e-3 * np.trace(A, axis1=1, axis2=2) + 1e-12
+        step = np.zeros((K, 6))
+        step[:, 3:] = np.linalg.solve(A + damping[:, None, None] * np.eye(3), -b[..., None])[..., 0]
+        X[states] = X[states] @ se3_exp(step)
+    return X
+
+
+def position_sigmas(fit: OptimizerResult, n_states: int) -> Array:
+    """Per state, the largest position standard deviation (m) of its marginal covariance."""
+    cov = np.stack([fit.covariance(BOARD_POSE.key(k))[3:, 3:] for k in range(n_states)])
+    return np.sqrt(np.linalg.eigvalsh(cov)[:, -1])
+
+
+def track(board: Board, angles: Angles, stations: Stations,
+          models: dict[int, StationModel] | None = None, options: GraphOptions | None = None,
+          pose_solver: PoseSolver | None = None, progress: Progress | None = None
+          ) -> TrackResult:
+    """The board's path ``T_world_board`` (one state per sweep) with every station held at its
+    ``T_world_lh`` in ``stations`` (the world is the stations file's). ``angles`` as measured
+    (rad, before factory correction); ``models`` by station index (default: the stations
+    file's); ``pose_solver`` the per-measurement PnP (default: planar homography)."""
+    options = options or GraphOptions()
+    t0 = time.perf_counter()
+    problem, T_world_lh = tracking_problem(board, angles, stations, models)
+    init, n_pnp = initial_path(board, angles, problem, T_world_lh, pose_solver)
+    timings = {"initialise": time.perf_counter() - t0}
+    if progress:
+        progress(f"initialised {problem.n_states} board states from {n_pnp} PnP poses")
+    graph, ev = build_graph(problem, options, T_world_lh)
+    values = initial_values(ev.layout, init)
+    hook = NoiseAdaptation(ev, options, progress) if NoiseAdaptation.enabled(options) else None
+    try:
+        fit = levenberg_marquardt(graph, values, ev.cost, ev.layout,
+                                  LMParams.from_options(options), hook, progress)
+        sigma = position_sigmas(fit, problem.n_states)
+    except RuntimeError as err:  # gtsam's IndeterminateLinearSystemException and kin
+        raise SolverError("the linearised path cannot be solved: some board state is not "
+                          "determined by the data") from err
+    ev.evaluate(fit.values)
+    timings["optimise"] = time.perf_counter() - t0 - timings["initialise"]
+    ids = np.asarray(problem.station_ids)
+    psd_rot, psd_pos = ev.motion_psd()
+    return TrackResult(
+        trajectory=Trajectory(problem.state_time, ev.board_poses().copy()),
+        lighthouse=ids[problem.state_station],
+        hits=np.diff(problem.bounds),
+        sigma_m=sigma,
+        initialised=n_pnp,
+        status=fit.status.value,
+        iterations=fit.iterations,
+        timings_s=timings,
+        diagnostics={"accel_psd_rot": psd_rot, "accel_psd_pos": psd_pos,
+                     "angle_sigma_rad": ev.angle_sigma()},
+    )
