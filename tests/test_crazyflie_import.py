@@ -1,0 +1,238 @@
+"""Crazyflie uSD log: reader and writer (round trip, CRC, truncation, not a log), the LH1
+angles (repeats dropped, LH2 refused), the Bitcraze calibration mapping, and the real import.
+
+Synthetic logs are built with the project's own writer. The real-data tests read
+``/work/shared/data/bitcraze-positioning`` (no licence: never copied into the repository)
+and are skipped when it is absent.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lhgraph.cli import main
+from lhgraph.importers.crazyflie import (
+    EventType,
+    UsdLog,
+    encode_usd_log,
+    import_crazyflie,
+    read_usd_log,
+    write_usd_log,
+)
+from lhgraph.importers.crazyflie.sweeps import lh1_angles
+from lhgraph.io.angles import load_angles
+from lhgraph.io.files import read_csv_columns
+from lhgraph.io.stations import load_stations
+from lhgraph.model.bitcraze import calibration_from_bitcraze, calibration_to_bitcraze
+from lhgraph.model.board import load_board
+from lhgraph.model.boards import crazyflie_deck
+from lhgraph.model.lh1 import FactoryCalibration, StationModel, ideal_from_measured
+
+DATA = Path("/work/shared/data/bitcraze-positioning")
+LH1 = DATA / "lh1_crossingBeam_move"
+needs_data = pytest.mark.skipif(not (LH1 / "log02").is_file(),
+                                reason="shared Bitcraze dataset absent")
+
+TYPES = (
+    EventType(0xFFFF, "fixedFrequency", tuple((f"{s}.{k}", "f") for s in ("gyro", "acc")
+                                              for k in "xyz")),
+    EventType(0, "activeMarkerModeChanged", (("mode", "B"),)),
+    EventType(1, "lhAngle", (("sensor", "B"), ("basestation", "B"), ("sweep", "B"),
+                             ("angle", "f"), ("correctedAngle", "f"))),
+)
+
+
+def synthetic_log(version: int = 2, period_s: float = 1 / 30, n_cycles: int = 60,
+                  repeat: bool = True) -> UsdLog:
+    """A two-station LH1-like log: each station's pair (4 sensors x 2 sweeps) every
+    ``period_s``; with ``repeat``, station 0's pair logged again next to station 1's."""
+    unit = 1e-3 if version == 1 else 1e-6
+    rng = np.random.default_rng(1)
+    rows = []
+    for c in range(n_cycles):
+        t0 = 1.0 + c * period_s
+        fresh = rng.uniform(-0.5, 0.5, (2, 2, 4))
+        for bs, t_log in ((0, t0), (1, t0 + period_s / 2)):
+            stations = (0, 1) if (bs == 1 and repeat) else (bs,)
+            for sensor in range(4):
+                for b in stations:
+                    for sweep in (0, 1):
+                        rows.append((t_log, sensor, b, sweep, fresh[b, sweep, sensor]))
+    rows.sort(key=lambda r: r[0])
+    ang = np.zeros(len(rows), dtype=[("timestamp", "<u8"), ("sensor", "u1"),
+                                     ("basestation", "u1"), ("sweep", "u1"), ("angle", "<f4"),
+                                     ("correctedAngle", "<f4")])
+    for i, (t, s, b, w, a) in enumerate(rows):
+        ang[i] = (round(t / unit) + (i if version == 2 else 0), s, b, w, a, a + 0.01)
+    n_imu = 200
+    imu = np.zeros(n_imu, dtype=[("timestamp", "<u8")] + [(v, "<f4") for v, _ in
+                                                          TYPES[0].variables])
+    imu["timestamp"] = np.round((1.0 + np.arange(n_imu) * 0.01) / unit)
+    imu["acc.z"] = 1.0
+    imu["gyro.x"] = 90.0
+    marker = np.zeros(2, dtype=[("timestamp", "<u8"), ("mode", "u1")])
+    marker["timestamp"] = np.round(np.array([1.1, 2.5]) / unit)
+    marker["mode"] = (1, 0)
+    return UsdLog(version, TYPES, {"fixedFrequency": imu, "activeMarkerModeChanged": marker,
+                                   "lhAngle": ang})
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_written_log_round_trips(tmp_path, version):
+    log = synthetic_log(version)
+    path = write_usd_log(log, tmp_path / "log00")
+    back = read_usd_log(path)
+    assert back.notes == () and back.version == version and back.types == log.types
+    for name, ev in log.events.items():
+        for field in ev.dtype.names:
+            np.testing.assert_array_equal(back.events[name][field], ev[field])
+    assert encode_usd_log(back) == path.read_bytes()
+
+
+def test_crc_mismatch_keeps_events_and_says_so(tmp_path):
+    data = bytearray(encode_usd_log(synthetic_log()))
+    data[-10] ^= 0x40  # a value byte of the last event
+    (tmp_path / "log").write_bytes(bytes(data))
+    log = read_usd_log(tmp_path / "log")
+    assert any("CRC mismatch" in n for n in log.notes)
+    assert log.count("lhAngle") == synthetic_log().events["lhAngle"].size
+
+
+def test_corrupted_timestamp_drops_the_rest(tmp_path):
+    log = synthetic_log()
+    data = bytearray(encode_usd_log(log))
+    n = len(data)
+    body = n // 2
+    # find an lhAngle event start near the middle by re-encoding a prefix
+    offsets = []
+    pos = data.index(b"correctedAngle(f)\0") + len("correctedAngle(f)\0")
+    size = {0xFFFF: 2 + 8 + 24, 0: 2 + 8 + 1, 1: 2 + 8 + 11}
+    while pos < n - 4:
+        offsets.append(pos)
+        pos += size[data[pos] | data[pos + 1] << 8]
+    hit = next(o for o in offsets if o > body and data[o] == 1 and data[o + 1] == 0)
+    data[hit + 2:hit + 10] = (0).to_bytes(8, "little")  # time 0: back in time
+    (tmp_path / "log").write_bytes(bytes(data))
+    back = read_usd_log(tmp_path / "log")
+    assert any("CRC mismatch" in s for s in back.notes)
+    assert any(f"after byte {hit}" in s and "back in time" in s for s in back.notes)
+    assert back.count("lhAngle") < log.count("lhAngle")
+
+
+@pytest.mark.parametrize("cut", [1, 3, 7, 25])
+def test_truncated_log_keeps_whole_events(tmp_path, cut):
+    data = encode_usd_log(synthetic_log())
+    (tmp_path / "log").write_bytes(data[:-cut])
+    log = read_usd_log(tmp_path / "log")
+    total = sum(len(v) for v in synthetic_log().events.values())
+    kept = sum(len(v) for v in log.events.values())
+    assert kept < total or cut <= 4
+    assert any("CRC mismatch" in n for n in log.notes)
+    if cut > 4:
+        assert any("dropped the last" in n or "dropped events" in n for n in log.notes)
+
+
+@pytest.mark.parametrize("content", [b"", b"hello world", b"\xbc\x07\x00\x01\x00",
+                                     b"\xbc\x02\x00\x01\x00\x01\x00ab"])
+def test_not_a_log_is_one_line_exit_2(tmp_path, capsys, content):
+    path = tmp_path / "log00"
+    path.write_bytes(content)
+    assert main(["import", "crazyflie", str(path), "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0]
+    assert not (tmp_path / "out" / "angles.csv").exists()
+
+
+def test_repeats_dropped_and_angles_at_30_hz(tmp_path):
+    log = synthetic_log()
+    angles, summary = lh1_angles(log)
+    assert summary.repeats[0] == 60 * 8 and summary.repeats[1] == 0
+    assert summary.kept == {0: 60 * 8, 1: 60 * 8}
+    sel = (angles.lighthouse == 0) & (angles.axis == 0) & (angles.sensor == 2)
+    np.testing.assert_allclose(np.diff(angles.time[sel]), 1 / 30, atol=5e-5)
+    np.testing.assert_allclose(angles.extra["corrected_angle"] - angles.angle, 0.01, atol=1e-6)
+
+
+def test_import_synthetic_writes_contract_files(tmp_path, capsys):
+    write_usd_log(synthetic_log(), tmp_path / "log07")
+    out = tmp_path / "out"
+    assert main(["import", "crazyflie", str(tmp_path / "log07"), "-o", str(out)]) == 0
+    assert "station 0: 480" in capsys.readouterr().out
+    a = load_angles(out / "angles.csv")
+    assert a.stations() == [0, 1] and "corrected_angle" in a.extra
+    np.testing.assert_allclose(load_board(out / "board.toml").positions, crazyflie_deck().positions)
+    imu = read_csv_columns(out / "imu.csv", [("time", float), ("az", float), ("gx", float)])
+    np.testing.assert_allclose(imu["az"], 9.80665, rtol=1e-6)
+    np.testing.assert_allclose(imu["gx"], np.pi / 2, rtol=1e-6)
+    assert not (out / "mocap.csv").exists()
+    assert main(["import", "crazyflie", str(tmp_path / "log07"), "-o", str(out)]) == 2
+    assert "exists already" in capsys.readouterr().err
+
+
+def test_lh2_log_is_refused(tmp_path, capsys):
+    write_usd_log(synthetic_log(period_s=1 / 50), tmp_path / "log00")
+    assert main(["import", "crazyflie", str(tmp_path / "log00"), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "LH2" in err[0] and "#15" in err[0]
+
+
+def test_calibration_mapping_round_trip():
+    rng = np.random.default_rng(3)
+    sweeps = [{"phase": rng.normal(0, 0.05), "tilt": rng.normal(0, 0.01),
+               "curve": rng.normal(0, 0.005), "gibphase": rng.uniform(-3, 3),
+               "gibmag": rng.normal(0, 0.01), "ogeephase": 0.0, "ogeemag": 0.0}
+              for _ in range(2)]
+    back = calibration_to_bitcraze(calibration_from_bitcraze(sweeps))
+    for s, b in zip(sweeps, back, strict=True):
+        for key, value in s.items():
+            assert b[key] == pytest.approx(value, abs=1e-12)
+
+
+@needs_data
+def test_mapping_reproduces_corrected_angle():
+    from lhgraph.io.cfclient import read_system_config
+
+    angles, _ = lh1_angles(read_usd_log(LH1 / "log02"))
+    config = read_system_config(LH1 / "system-config.yaml")
+    # a logged group (both sweeps of every station) spans < 1 ms; groups are >= 15 ms apart
+    log_time = angles.extra["log_time"]
+    order = np.argsort(log_time)
+    t = np.empty(len(order), dtype=np.int64)
+    t[order] = np.cumsum(np.r_[0, np.diff(log_time[order]) > 1e-3])
+    for bs in (0, 1):
+        pairs = {}
+        for ax in (0, 1):
+            s = (angles.lighthouse == bs) & (angles.axis == ax)
+            pairs[ax] = {(tt, k): (a, c) for tt, k, a, c in zip(
+                t[s], angles.sensor[s], angles.angle[s], angles.extra["corrected_angle"][s],
+                strict=True)}
+        keys = sorted(set(pairs[0]) & set(pairs[1]))
+        m = np.array([[pairs[0][k][0], pairs[1][k][0]] for k in keys])
+        c = np.array([[pairs[0][k][1], pairs[1][k][1]] for k in keys])
+        model = StationModel(config.calibrations[bs].calibration)
+        az, el = ideal_from_measured(m[:, 0], m[:, 1], model)
+        res = np.abs(np.c_[az, el] - c)
+        assert np.median(res) < 2e-5
+        identity = ideal_from_measured(m[:, 0], m[:, 1], StationModel(FactoryCalibration()))
+        assert np.median(np.abs(np.c_[identity[0], identity[1]] - c)) > 1e-2
+
+
+@needs_data
+def test_real_import_end_to_end(tmp_path):
+    r = import_crazyflie(LH1 / "log02", tmp_path, LH1 / "system-config.yaml")
+    assert r.notes == () and r.version == 2
+    assert r.sweeps.repeats[0] > 5000 and r.sweeps.repeats[1] < 100
+    a = load_angles(tmp_path / "angles.csv")
+    for bs in (0, 1):
+        sel = (a.lighthouse == bs) & (a.axis == 0) & (a.sensor == 0)
+        assert np.median(np.diff(a.time[sel])) == pytest.approx(1 / 30, abs=1e-3)
+    st = load_stations(tmp_path / "stations-cfclient.toml")
+    assert st.indices() == [0, 1]
+    assert 3.0 < np.linalg.norm(st.pose(0)[:3, 3] - st.pose(1)[:3, 3]) < 5.0
+    mocap = read_csv_columns(tmp_path / "mocap.csv", [("time", float), ("x", float)])
+    assert mocap["time"][0] >= r.mocap.time[0] - 1e-6 and abs(r.mocap.rate - 1) < 0.02
+    for name in ("board.toml", "imu.csv", "ootx.toml"):
+        assert (tmp_path / name).is_file()
