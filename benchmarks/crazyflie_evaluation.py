@@ -1,0 +1,208 @@
+"""Station geometries judged on the real Crazyflie LH1 log: issue #14's measure (b), and (a).
+
+(b) The log's own ``correctedAngle`` (the deck firmware's factory-corrected angles) turned
+into crossing-beam positions through a stations TOML, as the Crazyflie computes on board
+with an uploaded geometry: at every moment (station 0's fresh pairs), each station's
+azimuth and elevation of each diode are interpolated linearly in time (neighbours within
+``--max-gap`` on both sides), the two rays of a diode are intersected (midpoint of the
+shortest segment) and the diodes seen by both stations are averaged. Positions are compared
+with the Qualisys marker body as the dataset's authors do: mocap on the log clock by the
+marker on/off events (``mocap.csv`` of ``lhgraph import crazyflie``), then a search of
++-100 ms at both ends (offset and clock rate) for the smallest rigid-fit (Kabsch) residual;
+percentiles of the position error after the best rigid fit.
+
+(a) ``--track T.csv``: a trajectory CSV (``lhgraph track`` output, board frame = the deck)
+evaluated the same way (positions only). ``lhgraph track`` is not in the tree yet: pass its
+output when it is.
+
+    python3 benchmarks/crazyflie_evaluation.py [--import-dir DIR] \
+        [--stations NAME=FILE ...] [--track NAME=T.csv ...]
+
+Default: imports the shared log into a temporary directory and evaluates
+``stations-cfclient.toml``. Writes docs/results/crazyflie_evaluation.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from lhgraph.geometry.kabsch import weighted_kabsch
+from lhgraph.geometry.transforms import transform_points
+from lhgraph.importers.crazyflie import import_crazyflie
+from lhgraph.io.angles import Angles, load_angles
+from lhgraph.io.files import read_csv_columns
+from lhgraph.io.stations import Stations, load_stations
+from lhgraph.io.trajectory import load_trajectory
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")
+SEARCH_S = 0.1
+PERCENTILES = (25, 50, 75, 90, 95)
+
+
+def ray_directions(azimuth: np.ndarray, elevation: np.ndarray) -> np.ndarray:
+    """Unit directions (station frame) of LH1 ideal angle pairs: ``(1, tan az, tan el)``."""
+    d = np.stack([np.ones_like(azimuth), np.tan(azimuth), np.tan(elevation)], axis=-1)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def crossing_points(o0: np.ndarray, d0: np.ndarray, o1: np.ndarray, d1: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Midpoints of the shortest segments between rays ``o + s d`` (world), and the segment
+    lengths (m): the crossing beams."""
+    w = o0 - o1
+    b = np.sum(d0 * d1, -1)
+    dd, e = np.sum(d0 * w, -1), np.sum(d1 * w, -1)
+    den = 1.0 - b * b
+    s, u = (b * e - dd) / den, (e - b * dd) / den
+    p0, p1 = o0 + s[..., None] * d0, o1 + u[..., None] * d1
+    return (p0 + p1) / 2, np.linalg.norm(p0 - p1, axis=-1)
+
+
+def interpolated(angles: Angles, station: int, axis: int, sensor: int, moments: np.ndarray,
+                 max_gap_s: float) -> np.ndarray:
+    """``corrected_angle`` of one series at ``moments`` (NaN without neighbours within
+    ``max_gap_s`` on both sides)."""
+    s = (angles.lighthouse == station) & (angles.axis == axis) & (angles.sensor == sensor)
+    t, v = angles.time[s], angles.extra["corrected_angle"][s]
+    out = np.full(len(moments), np.nan)
+    if len(t) < 2:
+        return out
+    i = np.clip(np.searchsorted(t, moments), 1, len(t) - 1)
+    ok = (moments >= t[i - 1]) & (moments <= t[i]) & (moments - t[i - 1] <= max_gap_s) \
+        & (t[i] - moments <= max_gap_s)
+    out[ok] = np.interp(moments[ok], t, v)
+    return out
+
+
+def crossing_beam_positions(angles: Angles, stations: Stations, max_gap_s: float = 0.05,
+                            stations_pair: tuple[int, int] = (0, 1)
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """Deck positions (world of ``stations``) at station ``pair[0]``'s fresh axis-1 hits:
+    ``(time, position (N, 3))``, moments without a diode seen by both stations left out."""
+    a, b = stations_pair
+    moments = np.unique(angles.time[(angles.lighthouse == a) & (angles.axis == 1)])
+    points = []
+    for k in np.unique(angles.sensor):
+        rays = []
+        for st in (a, b):
+            az = interpolated(angles, st, 0, k, moments, max_gap_s)
+            el = interpolated(angles, st, 1, k, moments, max_gap_s)
+            T = stations.pose(st)
+            rays.append((np.broadcast_to(T[:3, 3], (len(moments), 3)),
+                         ray_directions(az, el) @ T[:3, :3].T))
+        p, _ = crossing_points(*rays[0], *rays[1])
+        points.append(p)
+    stack = np.stack(points)
+    seen = np.all(np.isfinite(stack), axis=2)
+    P = np.where(seen[..., None], stack, 0.0).sum(axis=0) / np.maximum(seen.sum(0), 1)[:, None]
+    ok = seen.any(axis=0)
+    return moments[ok], P[ok]
+
+
+def _mocap_at(t_m: np.ndarray, p_m: np.ndarray, t: np.ndarray, max_gap_s: float = 0.02
+              ) -> np.ndarray:
+    i = np.clip(np.searchsorted(t_m, t), 1, len(t_m) - 1)
+    ok = (t >= t_m[i - 1]) & (t <= t_m[i]) & (t_m[i] - t_m[i - 1] <= max_gap_s)
+    out = np.full((len(t), 3), np.nan)
+    out[ok] = np.stack([np.interp(t[ok], t_m, p_m[:, j]) for j in range(3)], axis=1)
+    return out
+
+
+def aligned_errors(t: np.ndarray, p: np.ndarray, t_m: np.ndarray, p_m: np.ndarray,
+                   step_s: float = 0.005) -> tuple[np.ndarray, float, float]:
+    """Position errors (m) after the best rigid fit over a +-100 ms search of the mocap's
+    start and end offsets (coarse ``step_s`` grid, then 1 ms around the best); also the
+    offsets (s) at the start and end."""
+    t0, t1 = t_m[0], t_m[-1]
+
+    def residual(d0: float, d1: float) -> tuple[float, np.ndarray]:
+        shifted = t_m + d0 + (d1 - d0) * (t_m - t0) / (t1 - t0)
+        q = _mocap_at(shifted, p_m, t)
+        ok = np.all(np.isfinite(q), axis=1)
+        T = weighted_kabsch(p[ok], q[ok])
+        e = np.full(len(t), np.nan)
+        e[ok] = np.linalg.norm(transform_points(T, p[ok]) - q[ok], axis=1)
+        return float(np.sqrt(np.nanmean(e**2))), e
+
+    best = (np.inf, 0.0, 0.0)
+    for grid in (np.arange(-SEARCH_S, SEARCH_S + 1e-9, step_s), None):
+        if grid is None:
+            c0, c1 = best[1], best[2]
+            g0 = np.arange(c0 - step_s, c0 + step_s + 1e-9, 0.001)
+            g1 = np.arange(c1 - step_s, c1 + step_s + 1e-9, 0.001)
+        else:
+            g0 = g1 = grid
+        for d0 in g0:
+            for d1 in g1:
+                r, _ = residual(d0, d1)
+                if r < best[0]:
+                    best = (r, float(d0), float(d1))
+    _, e = residual(best[1], best[2])
+    return e[np.isfinite(e)], best[1], best[2]
+
+
+def row(name: str, e: np.ndarray, d0: float, d1: float, n: int) -> str:
+    pct = np.percentile(e * 1e3, PERCENTILES)
+    return (f"| {name} | {n} | " + " | ".join(f"{x:.1f}" for x in pct)
+            + f" | {np.sqrt(np.mean(e**2)) * 1e3:.1f} | {d0 * 1e3:+.0f} / {d1 * 1e3:+.0f} |")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--import-dir", type=Path, help="output of lhgraph import crazyflie")
+    ap.add_argument("--stations", nargs="*", default=[], help="NAME=stations.toml")
+    ap.add_argument("--track", nargs="*", default=[], help="NAME=trajectory.csv (measure a)")
+    ap.add_argument("--max-gap", type=float, default=0.05, help="interpolation gap (s)")
+    ap.add_argument("--output", type=Path, default=ROOT / "docs/results/crazyflie_evaluation.md")
+    args = ap.parse_args()
+    start = time.perf_counter()
+    tmp = None
+    if args.import_dir is None:
+        tmp = tempfile.TemporaryDirectory()
+        args.import_dir = Path(tmp.name)
+        import_crazyflie(DATA / "log02", args.import_dir, DATA / "system-config.yaml")
+    angles = load_angles(args.import_dir / "angles.csv")
+    mocap = read_csv_columns(args.import_dir / "mocap.csv",
+                             [("time", float), ("x", float), ("y", float), ("z", float)])
+    t_m = mocap["time"]
+    p_m = np.stack([mocap["x"], mocap["y"], mocap["z"]], axis=1)
+    geometries = dict(s.split("=", 1) for s in args.stations) or {
+        "cfclient": str(args.import_dir / "stations-cfclient.toml")}
+    lines = ["# Crazyflie LH1 log: station geometries against Qualisys", "",
+             "`python3 benchmarks/crazyflie_evaluation.py` (docs/crazyflie.md). Position error "
+             "(mm) after the best rigid fit to the mocap, offsets searched +-100 ms at both "
+             "ends (start / end offset in the last column, ms).", "",
+             "## (b) the log's correctedAngle as crossing-beam positions", "",
+             "| geometry | moments | " + " | ".join(f"p{p}" for p in PERCENTILES)
+             + " | rms | offsets |", "|---" * (len(PERCENTILES) + 4) + "|"]
+    for name, path in geometries.items():
+        t, p = crossing_beam_positions(angles, load_stations(path), args.max_gap)
+        e, d0, d1 = aligned_errors(t, p, t_m, p_m)
+        lines.append(row(name, e, d0, d1, len(e)))
+    lines += ["", "## (a) tracked positions (`lhgraph track`)", ""]
+    if args.track:
+        lines += ["| track | poses | " + " | ".join(f"p{p}" for p in PERCENTILES)
+                  + " | rms | offsets |", "|---" * (len(PERCENTILES) + 4) + "|"]
+        for name, path in (s.split("=", 1) for s in args.track):
+            tr = load_trajectory(path)
+            e, d0, d1 = aligned_errors(tr.time, tr.T_world_board[:, :3, 3], t_m, p_m)
+            lines.append(row(name, e, d0, d1, len(e)))
+    else:
+        lines.append("Not measured: no `--track` trajectory given (`lhgraph track` was not in "
+                     "the tree when this was run).")
+    lines += ["", f"Run time: {time.perf_counter() - start:.1f} s.", ""]
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text("\n".join(lines))
+    print("\n".join(lines))
+    if tmp is not None:
+        tmp.cleanup()
+
+
+if __name__ == "__main__":
+    main()
