@@ -1,11 +1,15 @@
-"""Streaming calibration: sync cycles are added to an incremental smoother as they arrive.
+"""Streaming calibration and tracking: sync cycles are added to an incremental smoother as
+they arrive.
 
 The first ``warmup_s`` seconds are solved in batch
-(:func:`lhgraph.estimation.graph.solver.solve_graph`) to
+(:func:`lhgraph.estimation.graph.solver.solve_graph`; tracking:
+:func:`lhgraph.estimation.graph.track.track`) to
 initialise; afterwards every call of :meth:`StreamingSolver.add` appends the new sweeps'
 board states, bearing factors, offset priors and motion priors to GTSAM's
 ``IncrementalFixedLagSmoother`` (iSAM2 underneath) and returns the current station
 estimate. Board states older than ``lag_s`` are marginalised; the station poses never are.
+Tracking (``stations`` given, :func:`track_stream`): every station is held at its known pose,
+no station variable, and each estimate carries the board states the update added.
 The factors come from the batch graph's :class:`FactorBuilder`; inside iSAM2 each factor
 callback evaluates only its own sweep (GTSAM copies the Values for every Python callback, so
 the window, not the capture, sets the cost).
@@ -26,6 +30,13 @@ from lhgraph.estimation.graph.factors import FactorBuilder
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.graph.track import (
+    TrackedPath,
+    path_of,
+    station_slot_poses,
+    track,
+    tracking_problem,
+)
 from lhgraph.estimation.graph.variables import (
     BOARD_POSE,
     BOARD_TWIST,
@@ -42,6 +53,7 @@ from lhgraph.estimation.residuals import (
 )
 from lhgraph.geometry.transforms import se3_exp
 from lhgraph.io.angles import Angles
+from lhgraph.io.stations import Stations
 from lhgraph.model.board import Board
 from lhgraph.model.lh1 import StationModel
 
@@ -50,29 +62,37 @@ Array = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class StreamingEstimate:
-    """Station poses ``T_world_lh`` (index -> 4x4) and covariances after an update."""
+    """Station poses ``T_world_lh`` (index -> 4x4) and covariances after an update; when
+    tracking, ``path``: the board states the update added (the warm-up: all of its own), each
+    as estimated then (filtered, not smoothed by later data)."""
 
     time: float
     stations: dict[int, Array]
     covariances: dict[int, Array]
     update_s: float
+    path: TrackedPath | None = None
 
 
-def _bearing_error(hits: BearingHits, k: int, slot: int, model: StationModel) -> Callable:
-    """Callback of one sweep's bearing factor, evaluating only that sweep."""
+def _bearing_error(hits: BearingHits, k: int, slot: int, model: StationModel,
+                   T_world_lh: Array | None) -> Callable:
+    """Callback of one sweep's bearing factor, evaluating only that sweep; the station is
+    held at ``T_world_lh`` when given, else it is variable ``slot`` (or the world: slot 0)."""
     models = [StationModel()] * slot + [model]
+    variable = T_world_lh is None and slot > 0
 
     def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
         Xk = values.atPose3(BOARD_POSE.key(k)).matrix()[None]
         Wk = values.atVector(BOARD_TWIST.key(k))[None]
         Ls = np.repeat(np.eye(4)[None], slot + 1, axis=0)
-        if slot > 0:
+        if T_world_lh is not None:
+            Ls[slot] = T_world_lh
+        elif variable:
             Ls[slot] = values.atPose3(STATION_POSE.key(slot)).matrix()
         r, HX, HW, HL = bearing_residuals(hits, Xk, Wk, Ls, models, jacobians=H is not None)
         r = r + values.atVector(SWEEP_OFFSET.key(k))[0]
         if H is not None:
             H[0], H[1], H[2] = HX, HW, np.ones((len(r), 1))
-            if slot > 0:
+            if variable:
                 H[3] = HL
         return r
 
@@ -111,15 +131,22 @@ def _isam2_params() -> gtsam.ISAM2Params:
 
 
 class StreamingSolver:
-    """Incremental calibration of the stations in ``station_ids`` (first = reference)."""
+    """Incremental calibration of the stations in ``station_ids`` (first = reference), or,
+    with ``stations``, tracking with every one of them held at its pose there (the world is
+    the stations file's; ``models`` default to its own)."""
 
     def __init__(self, board: Board, station_ids: list[int],
                  models: dict[int, StationModel] | None = None,
                  options: GraphOptions | None = None, lag_s: float = 0.5,
-                 warmup_s: float = 1.0):
+                 warmup_s: float = 1.0, stations: Stations | None = None):
         self.board = board
         self.station_ids = list(station_ids)
+        self.stations = stations
+        self._T_world_lh = (None if stations is None
+                            else station_slot_poses(stations, self.station_ids))
         self.models = models or {}
+        if stations is not None:
+            self.models = {s: stations.stations[s].model for s in self.station_ids} | self.models
         self.options = options or GraphOptions()
         self.lag_s = lag_s
         self.warmup_s = warmup_s
@@ -141,15 +168,21 @@ class StreamingSolver:
             data = _concat(self._pending)
             if data.time[-1] - data.time[0] < self.warmup_s:
                 return None
-            self._start(data)
+            path = self._start(data)
         else:
-            self._extend(chunk)
-        return self.estimate(time.perf_counter() - tic)
+            path = self._extend(chunk)
+        return self.estimate(time.perf_counter() - tic, path)
 
-    def estimate(self, update_s: float = 0.0) -> StreamingEstimate:
-        """Current station poses and marginal covariances."""
+    def estimate(self, update_s: float = 0.0, path: TrackedPath | None = None
+                 ) -> StreamingEstimate:
+        """Current station poses and marginal covariances (tracking: the fixed ones, zero),
+        with the board states ``path`` of the update."""
         if self._smoother is None:
             raise SolverError("no estimate yet: still warming up")
+        if self._T_world_lh is not None:
+            return StreamingEstimate(
+                self._last[0], dict(zip(self.station_ids, self._T_world_lh, strict=True)),
+                {sid: np.zeros((6, 6)) for sid in self.station_ids}, update_s, path)
         values = self._smoother.calculateEstimate()
         poses = {self.station_ids[0]: np.eye(4)}
         covs = {self.station_ids[0]: np.zeros((6, 6))}
@@ -158,9 +191,15 @@ class StreamingSolver:
             covs[sid] = self._smoother.marginalCovariance(STATION_POSE.key(slot))
         return StreamingEstimate(self._last[0], poses, covs, update_s)
 
-    def _start(self, data: Angles) -> None:
-        batch = solve_graph(self.board, data, self.models,
-                            replace(self.options, reference=self.station_ids[0]))
+    def _start(self, data: Angles) -> TrackedPath | None:
+        """The warm-up batch and the smoother's start; tracking: the warm-up's path."""
+        if self.stations is None:
+            batch = solve_graph(self.board, data, self.models,
+                                replace(self.options, reference=self.station_ids[0]))
+            path = None
+        else:
+            batch = track(self.board, data, self.stations, self.models, self.options)
+            path = batch.path
         self._psd = (batch.diagnostics.get("accel_psd_rot", self._psd[0]),
                      batch.diagnostics.get("accel_psd_pos", self._psd[1]))
         self._sigma = batch.diagnostics.get("angle_sigma_rad", self._sigma)
@@ -168,8 +207,9 @@ class StreamingSolver:
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
-        t_now = float(batch.trajectory.time[-1])
-        for slot, sid in enumerate(self.station_ids[1:], start=1):
+        trajectory = batch.trajectory if path is None else path.trajectory
+        t_now = float(trajectory.time[-1])
+        for slot, sid in enumerate(self.station_ids[1:] if path is None else [], start=1):
             T = batch.stations.pose(sid)
             values.insert(STATION_POSE.key(slot), gtsam.Pose3(T))
             stamps.insert((STATION_POSE.key(slot), t_now))
@@ -178,9 +218,9 @@ class StreamingSolver:
             graph.add(gtsam.PriorFactorPose3(STATION_POSE.key(slot), gtsam.Pose3(T),
                                              gtsam.noiseModel.Gaussian.Covariance(cov)))
         # the last warm-up state starts the chain, with a prior from the batch solution
-        T_last = batch.trajectory.T_world_board[-1]
-        T_step = np.linalg.inv(batch.trajectory.T_world_board[-2]) @ T_last
-        dt = batch.trajectory.time[-1] - batch.trajectory.time[-2]
+        T_last = trajectory.T_world_board[-1]
+        T_step = np.linalg.inv(trajectory.T_world_board[-2]) @ T_last
+        dt = trajectory.time[-1] - trajectory.time[-2]
         xi = gtsam.Pose3.Logmap(gtsam.Pose3(T_step)) / dt
         k = self._new_state(values, stamps, t_now, T_last, xi)
         graph.add(gtsam.PriorFactorPose3(BOARD_POSE.key(k), gtsam.Pose3(T_last),
@@ -188,6 +228,7 @@ class StreamingSolver:
         graph.add(gtsam.PriorFactorVector(BOARD_TWIST.key(k), xi,
                                           gtsam.noiseModel.Isotropic.Sigma(6, 0.5)))
         self._smoother.update(graph, values, stamps)
+        return path
 
     def _new_state(self, values: gtsam.Values, stamps, t: float, T: Array, xi: Array) -> int:
         k = self._k
@@ -200,9 +241,15 @@ class StreamingSolver:
         self._last = (t, T, xi)
         return k
 
-    def _extend(self, chunk: Angles) -> None:
-        problem = build_problem(self.board, chunk, self.models, self.station_ids[0],
-                                self.station_ids)
+    def _extend(self, chunk: Angles) -> TrackedPath | None:
+        if self.stations is None:
+            problem = build_problem(self.board, chunk, self.models, self.station_ids[0],
+                                    self.station_ids)
+        else:
+            problem = tracking_problem(self.board, chunk, self.stations, self.models,
+                                       self.station_ids)[0]
+        tracking = self._T_world_lh is not None
+        first = self._k
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
@@ -216,19 +263,26 @@ class StreamingSolver:
             slot = int(problem.state_station[j])
             sweep = BearingHits(np.zeros(b - a, dtype=np.int64), h.station[a:b], h.s_board[a:b],
                                 h.axis[a:b], h.dt[a:b], h.angle[a:b])
-            graph.add(self._factors.bearing(k, slot if slot > 0 else None, int(b - a),
-                                            self._sigma, _bearing_error(sweep, k, slot,
-                                                                        problem.models[slot])))
+            fixed = self._T_world_lh[slot] if tracking else None
+            graph.add(self._factors.bearing(
+                k, None if tracking or slot == 0 else slot, int(b - a), self._sigma,
+                _bearing_error(sweep, k, slot, problem.models[slot], fixed)))
             graph.add(self._factors.offset_prior(k))
             Q = wnoa_covariance(np.array([dt]), *self._psd)[0]
             graph.add(self._factors.motion(k - 1, Q, _motion_error(k - 1, dt)))
         t_now = self._last[0]
-        for slot in range(1, len(self.station_ids)):
+        for slot in range(1, 1 if tracking else len(self.station_ids)):
             stamps.insert((STATION_POSE.key(slot), t_now))
         self._smoother.update(graph, values, stamps)
         current = self._smoother.calculateEstimate()
         self._last = (t_now, current.atPose3(BOARD_POSE.key(self._k - 1)).matrix(),
                       current.atVector(BOARD_TWIST.key(self._k - 1)))
+        if not tracking:
+            return None
+        keys = [BOARD_POSE.key(k) for k in range(first, self._k)]
+        T = np.stack([current.atPose3(key).matrix() for key in keys])
+        cov = np.stack([self._smoother.marginalCovariance(key)[3:, 3:] for key in keys])
+        return path_of(problem, T, np.sqrt(np.linalg.eigvalsh(cov)[:, -1]))
 
 
 def _concat(chunks: list[Angles]) -> Angles:
@@ -237,6 +291,21 @@ def _concat(chunks: list[Angles]) -> Angles:
     parts = {c: np.concatenate([getattr(a, c) for a in chunks]) for c in cols}
     extra = {k: np.concatenate([a.extra[k] for a in chunks]) for k in chunks[0].extra}
     return Angles(**parts, extra=extra)
+
+
+def track_stream(board: Board, angles: Angles, stations: Stations,
+                 models: dict[int, StationModel] | None = None,
+                 options: GraphOptions | None = None, lag_s: float = 0.5,
+                 warmup_s: float = 0.5) -> Iterator[StreamingEstimate]:
+    """Track the board through ``angles`` one sync cycle at a time (:func:`cycles`) with every
+    station held at its pose in ``stations``: one estimate per cycle after the warm-up, its
+    ``path`` the states that cycle added (the first: the warm-up's batch path)."""
+    solver = StreamingSolver(board, angles.stations(), models, options, lag_s, warmup_s,
+                             stations)
+    for chunk in cycles(angles):
+        estimate = solver.add(chunk)
+        if estimate is not None:
+            yield estimate
 
 
 def cycles(angles: Angles, cycle_s: float = 4 / 120.0) -> Iterator[Angles]:

@@ -54,26 +54,49 @@ PNP_MIN_SENSORS = 5
 
 
 @dataclass(frozen=True)
-class TrackResult:
-    """The tracked path: ``trajectory`` (``T_world_board`` per state, one state per sweep, in
-    the stations' world), per state the sweeping station's index ``lighthouse``, the diodes it
-    hit ``hits`` and the position standard deviation ``sigma_m`` (m, the largest axis of the
-    marginal position covariance); ``initialised`` = PnP poses the start was made of; the
-    optimiser's status and iterations; timings (s); the learned noise levels."""
+class TrackedPath:
+    """Board states of a tracked path: ``trajectory`` (``T_world_board``, one state per sweep,
+    in the stations' world) and per state the sweeping station's index ``lighthouse``, the
+    diodes it hit ``hits`` and the position standard deviation ``sigma_m`` (m, the largest
+    axis of the marginal position covariance)."""
 
     trajectory: Trajectory
     lighthouse: NDArray[np.int64]
     hits: NDArray[np.int64]
     sigma_m: Array
+
+    def columns(self) -> dict[str, NDArray]:
+        """The trajectory CSV's added columns, in order."""
+        return {"lighthouse": self.lighthouse, "hits": self.hits, "sigma_m": self.sigma_m}
+
+    @staticmethod
+    def concatenate(parts: list[TrackedPath]) -> TrackedPath:
+        """One path from consecutive ones."""
+        return TrackedPath(
+            Trajectory(np.concatenate([p.trajectory.time for p in parts]),
+                       np.concatenate([p.trajectory.T_world_board for p in parts])),
+            *(np.concatenate([getattr(p, c) for p in parts])
+              for c in ("lighthouse", "hits", "sigma_m")))
+
+
+def path_of(problem: GraphProblem, T_world_board: Array, sigma_m: Array) -> TrackedPath:
+    """The :class:`TrackedPath` of ``problem``'s states at poses ``T_world_board``."""
+    ids = np.asarray(problem.station_ids)
+    return TrackedPath(Trajectory(problem.state_time, T_world_board), ids[problem.state_station],
+                       np.diff(problem.bounds), sigma_m)
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    """A batch track: the ``path``; ``initialised`` = PnP poses the start was made of; the
+    optimiser's status and iterations; timings (s); the learned noise levels."""
+
+    path: TrackedPath
     initialised: int
     status: str
     iterations: int
     timings_s: dict[str, float] = field(default_factory=dict)
     diagnostics: dict[str, float] = field(default_factory=dict)
-
-    def columns(self) -> dict[str, NDArray]:
-        """The trajectory CSV's added columns, in order."""
-        return {"lighthouse": self.lighthouse, "hits": self.hits, "sigma_m": self.sigma_m}
 
 
 def station_slot_poses(stations: Stations, station_ids: list[int]) -> Array:
@@ -87,12 +110,12 @@ def station_slot_poses(stations: Stations, station_ids: list[int]) -> Array:
 
 
 def tracking_problem(board: Board, angles: Angles, stations: Stations,
-                     models: dict[int, StationModel] | None = None
-                     ) -> tuple[GraphProblem, Array]:
-    """The graph problem of ``angles`` (slots = the stations seen, in index order) and the
-    fixed ``T_world_lh`` (S, 4, 4) of its slots. Station models: ``models`` where given, else
-    the stations file's own."""
-    ids = angles.stations()
+                     models: dict[int, StationModel] | None = None,
+                     station_ids: list[int] | None = None) -> tuple[GraphProblem, Array]:
+    """The graph problem of ``angles`` (slots = ``station_ids``, default the stations seen, in
+    index order) and the fixed ``T_world_lh`` (S, 4, 4) of its slots. Station models:
+    ``models`` where given, else the stations file's own."""
+    ids = angles.stations() if station_ids is None else station_ids
     T_world_lh = station_slot_poses(stations, ids)
     merged = {s: stations.stations[s].model for s in ids} | dict(models or {})
     return build_problem(board, angles, merged, ids[0], ids), T_world_lh
@@ -221,13 +244,9 @@ def track(board: Board, angles: Angles, stations: Stations,
                           "determined by the data") from err
     ev.evaluate(fit.values)
     timings["optimise"] = time.perf_counter() - t0 - timings["initialise"]
-    ids = np.asarray(problem.station_ids)
     psd_rot, psd_pos = ev.motion_psd()
     return TrackResult(
-        trajectory=Trajectory(problem.state_time, ev.board_poses().copy()),
-        lighthouse=ids[problem.state_station],
-        hits=np.diff(problem.bounds),
-        sigma_m=sigma,
+        path=path_of(problem, ev.board_poses().copy(), sigma),
         initialised=n_pnp,
         status=fit.status.value,
         iterations=fit.iterations,
