@@ -367,37 +367,30 @@ def run_view(args: argparse.Namespace) -> int:
 COMMANDS.append(("view", add_view, run_view))
 
 
-# --- export ---
-# ``lhgraph export TARGET ...``: one sub-subcommand per foreign configuration format.
+# --- export --- (``lhgraph export TARGET ...``: one sub-subcommand per foreign format)
 
 
-def _add_export_cfclient(sub: argparse._SubParsersAction) -> None:
+def add_export(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     from lhgraph.choices import EXPORT_FRAMES, EXPORT_IMU_SAMPLES, EXPORT_UP
 
-    p = sub.add_parser("cfclient", help="Bitcraze cfclient's system-config.yaml (Crazyflie)",
-                       description="Write the stations and their factory calibration as "
-                       "cfclient's Lighthouse system configuration, in a world with z up from "
-                       "gravity and the origin and x axis chosen by name (docs/export.md).")
+    export = sub.add_parser("export", help="write the stations for other software")
+    targets = export.add_subparsers(dest="target", required=True, metavar="TARGET")
+    p = targets.add_parser("cfclient", help="Bitcraze cfclient's system-config.yaml",
+                           description="Write the stations and their factory calibration "
+                           "as cfclient's system configuration, z up from gravity, origin and "
+                           "x chosen by name (docs/export.md).")
     p.add_argument("stations", help="stations TOML (LH1)")
-    p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
     p.add_argument("--output", "-o", required=True, help="system-config.yaml to write")
-    p.add_argument("--up", choices=EXPORT_UP, default="auto",
-                   help="where up comes from (default auto: imu if --imu, else ootx if the "
-                   "calibration has accelerometer vectors, else none)")
+    p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
     p.add_argument("--imu", help="the receiver's imu.csv (board frame, SI units)")
-    p.add_argument("--trajectory", help="the receiver's trajectory CSV in the stations' world "
-                   "(lhgraph solve --trajectory, lhgraph track)")
-    p.add_argument("--imu-samples", choices=EXPORT_IMU_SAMPLES, default="auto",
-                   help="IMU samples averaged: at rest, all, or auto (still if >= 1 s of them)")
-    p.add_argument("--origin", choices=EXPORT_FRAMES, default="auto",
-                   help="world origin (default auto: receiver-start with --trajectory, else "
-                   "reference-station)")
-    p.add_argument("--x", choices=EXPORT_FRAMES, default="auto",
-                   help="whose x axis, made horizontal, is the world's +x (default as --origin)")
-    p.add_argument("--at", type=float, metavar="S", help="time (s) of the receiver pose for "
-                   "receiver-start (default: the trajectory's first state)")
+    p.add_argument("--trajectory", help="the receiver's trajectory CSV, stations' world")
+    for flag, choices in (("--up", EXPORT_UP), ("--imu-samples", EXPORT_IMU_SAMPLES),
+                          ("--origin", EXPORT_FRAMES), ("--x", EXPORT_FRAMES)):
+        p.add_argument(flag, choices=choices, default="auto", help="docs/export.md")
+    p.add_argument("--at", type=float, metavar="S", help="time of the receiver-start pose")
     _add_common_output(p)
     p.set_defaults(_export=_run_export_cfclient)
+    return export
 
 
 def _run_export_cfclient(args: argparse.Namespace) -> int:
@@ -405,9 +398,9 @@ def _run_export_cfclient(args: argparse.Namespace) -> int:
     from lhgraph.estimation.world_alignment import WorldOptions
     from lhgraph.workflow.export import export_cfclient
 
-    options = override(WorldOptions(), {
-        "--up": ("up", args.up), "--origin": ("origin", args.origin), "--x": ("x", args.x),
-        "--at": ("at_s", args.at), "--imu-samples": ("imu_samples", args.imu_samples)})
+    options = override(WorldOptions(), {f"--{name.replace('_', '-')}": (name, getattr(args, name))
+                                        for name in ("up", "origin", "x", "imu_samples")}
+                       | {"--at": ("at_s", args.at)})
     result = export_cfclient(args.stations, args.output, calibration=args.calibration,
                              imu=args.imu, trajectory=args.trajectory, options=options,
                              overwrite=args.force)
@@ -416,14 +409,6 @@ def _run_export_cfclient(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(result.summary())
     return 0
-
-
-def add_export(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("export", help="write the stations for other software",
-                       description="Write a stations TOML in another tool's format.")
-    targets = p.add_subparsers(dest="target", required=True, metavar="TARGET")
-    _add_export_cfclient(targets)
-    return p
 
 
 def run_export(args: argparse.Namespace) -> int:

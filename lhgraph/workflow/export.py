@@ -1,0 +1,154 @@
+"""``lhgraph export cfclient``: a stations TOML as cfclient's ``system-config.yaml``.
+
+:func:`export_cfclient` reads the stations (and optionally their factory calibration, the
+receiver's IMU stream and trajectory), re-expresses the stations in the world a Crazyflie
+user expects (:mod:`lhgraph.estimation.world_alignment`: z up from gravity, origin and x by
+name), maps our calibration terms to Bitcraze's (:mod:`lhgraph.model.bitcraze`) and writes
+the file (:mod:`lhgraph.io.cfclient`). Every input is checked before anything is written.
+docs/export.md describes the options.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lhgraph.errors import InputError
+from lhgraph.estimation.world_alignment import (
+    STANDARD_GRAVITY_MPS2,
+    UpEstimate,
+    WorldAlignment,
+    WorldOptions,
+    align_world,
+    transform_stations,
+    up_from_imu,
+    up_from_ootx,
+)
+from lhgraph.io.cfclient import SystemConfig, write_system_config
+from lhgraph.io.files import check_writable, read_csv_columns
+from lhgraph.io.stations import Stations, load_stations
+from lhgraph.io.trajectory import Trajectory, load_trajectory
+from lhgraph.model.calibration import StationCalibration, load_calibration
+
+IMU_COLUMNS = tuple((name, float) for name in ("time", "ax", "ay", "az"))
+GYRO_COLUMNS = ("gx", "gy", "gz")
+LH2_REFUSAL = ("LH2 stations cannot be exported yet (they come with issue #15): this "
+               "export writes LH1 systems (systemType 1)")
+
+
+@dataclass(frozen=True)
+class ImuStream:
+    """An IMU stream in the board frame: ``time`` (N,) s, ``accel_mps2`` (N, 3) and
+    ``gyro_rad_s`` (N, 3) or None."""
+
+    time: np.ndarray
+    accel_mps2: np.ndarray
+    gyro_rad_s: np.ndarray | None = None
+
+
+def load_imu(path: str | Path) -> ImuStream:
+    """Read an ``imu.csv`` (``time,ax,ay,az[,gx,gy,gz]``, s, m/s^2, rad/s; docs/formats.md)."""
+    c = read_csv_columns(path, IMU_COLUMNS, optional=GYRO_COLUMNS)
+    if len(c["time"]) < 3:
+        raise InputError(f"{len(c['time'])} rows: an up direction needs at least 3", path)
+    if np.any(back := np.diff(c["time"]) <= 0):
+        raise InputError("time must increase", path, str(int(np.flatnonzero(back)[0]) + 3))
+    accel = np.stack([c["ax"], c["ay"], c["az"]], axis=1)
+    gyro = (np.stack([c[k] for k in GYRO_COLUMNS], axis=1)
+            if all(k in c for k in GYRO_COLUMNS) else None)
+    return ImuStream(c["time"], accel, gyro)
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What :func:`export_cfclient` wrote: the file, its content, the stations in the new
+    world and how that world was chosen."""
+
+    path: Path
+    config: SystemConfig
+    stations: Stations
+    alignment: WorldAlignment
+    warnings: tuple[str, ...] = ()
+
+    def summary(self) -> str:
+        """Two lines for the terminal (the warnings are separate)."""
+        n_cal = len(self.config.calibrations)
+        return (f"wrote {self.path}: {len(self.config.T_world_lh)} station(s), {n_cal} with "
+                f"factory calibration, systemType {self.config.system_type}\n"
+                f"{self.alignment.summary()}")
+
+
+def _calibrations_of(stations: Stations, calibrations: dict[int, StationCalibration]
+                     ) -> tuple[dict[int, StationCalibration], list[str]]:
+    """The calibrations of the exported stations, and a warning per station without one."""
+    missing = [k for k in stations.indices() if k not in calibrations]
+    warnings = [f"station {k} has no factory calibration in the calibration file: the "
+                "Crazyflie will use what it receives from the station" for k in missing]
+    return {k: calibrations[k] for k in stations.indices() if k in calibrations}, warnings
+
+
+def _up(options: WorldOptions, stations: Stations,
+        calibrations: dict[int, StationCalibration] | None, imu: ImuStream | None,
+        trajectory: Trajectory | None) -> UpEstimate:
+    source = options.up
+    if source == "auto":
+        has_ootx = calibrations is not None and any(np.any(c.accel_dir)
+                                                    for c in calibrations.values())
+        source = "imu" if imu is not None else "ootx" if has_ootx else "none"
+    if source == "imu":
+        if imu is None or trajectory is None:
+            raise InputError("--up imu needs the receiver's IMU stream (--imu) and its "
+                             "trajectory (--trajectory)")
+        return up_from_imu(imu.time, imu.accel_mps2, imu.gyro_rad_s, trajectory, options)
+    if source == "ootx":
+        if calibrations is None:
+            raise InputError("--up ootx needs the stations' factory calibration "
+                             "(--calibration ootx.toml)")
+        return up_from_ootx(stations, calibrations)
+    return UpEstimate(np.array([0.0, 0.0, 1.0]), "none")
+
+
+def export_cfclient(stations_path: str | Path, output: str | Path, *,
+                    calibration: str | Path | None = None, imu: str | Path | None = None,
+                    trajectory: str | Path | None = None,
+                    options: WorldOptions | None = None,
+                    overwrite: bool = False) -> ExportResult:
+    """Write ``stations_path`` (a stations TOML, LH1) as cfclient's ``system-config.yaml``.
+
+    ``calibration``: an ``ootx.toml`` whose terms become the file's ``calibs`` (and whose
+    accelerometer vectors can give up); ``imu`` (``imu.csv``, board frame) and ``trajectory``
+    (``T_world_board`` in the stations' world, e.g. from ``lhgraph solve --trajectory`` or
+    ``lhgraph track``): the receiver's data for ``up = imu`` and the receiver-start choices.
+    """
+    options = options or WorldOptions()
+    output = check_writable(output, overwrite, create_parents=False)
+    if imu is not None and trajectory is None:
+        raise InputError("--imu needs --trajectory: the receiver's poses carry its "
+                         "accelerometer into the stations' world")
+    stations = load_stations(stations_path)
+    system = stations.extra.get("system_type", 1)
+    if system == 2:
+        raise InputError(LH2_REFUSAL, stations_path, "system_type")
+    if system != 1:
+        raise InputError(f"system_type must be 1 (LH1), got {system!r}", stations_path,
+                         "system_type")
+    calibrations = None if calibration is None else load_calibration(calibration)
+    stream = None if imu is None else load_imu(imu)
+    path_poses = None if trajectory is None else load_trajectory(trajectory)
+    if stream is not None and np.median(np.linalg.norm(stream.accel_mps2, axis=1)) < 0.5 * (
+            STANDARD_GRAVITY_MPS2):
+        raise InputError("the accelerometer reads well below 1 g: imu.csv must be in m/s^2",
+                         imu)
+    up = _up(options, stations, calibrations, stream, path_poses)
+    alignment = align_world(stations, up, path_poses, options)
+    moved = transform_stations(stations, alignment.T_new_w)
+    calibs, warnings = ({}, []) if calibrations is None else _calibrations_of(
+        stations, calibrations)
+    config = SystemConfig(1, {k: moved.pose(k) for k in moved.indices()}, calibs)
+    path = write_system_config(config, output, overwrite)
+    moved = dataclasses.replace(moved, extra={**moved.extra, "world": "cfclient"})
+    return ExportResult(path, config, moved, alignment,
+                        tuple(warnings) + alignment.warnings)
