@@ -42,11 +42,13 @@ def load_trajectory(path: str | Path) -> Trajectory:
     return Trajectory(c["time"], pose_from_quat(p, q / norm[:, None]))
 
 
-def save_trajectory(traj: Trajectory, path: str | Path, overwrite: bool = False) -> Path:
-    """Write a trajectory CSV."""
+def save_trajectory(traj: Trajectory, path: str | Path, overwrite: bool = False,
+                    extra: dict[str, NDArray] | None = None) -> Path:
+    """Write a trajectory CSV; ``extra`` columns (one value per row) after the contract's."""
     q = matrix_to_quat(traj.T_world_board[:, :3, :3])
     p = traj.T_world_board[:, :3, 3]
     cols = {"time": traj.time, "x": p[:, 0], "y": p[:, 1], "z": p[:, 2],
             "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3]}
-    fmts = {"time": "{:.9f}", **{k: "{:.10g}" for k in list(cols)[1:]}}
-    return write_csv_columns(path, cols, fmts, overwrite)
+    fmts = {"time": "{:.9f}", **{k: "{:.10g}" for k in list(cols)[1:]},
+            **{k: "{:.6g}" for k in extra or {}}}
+    return write_csv_columns(path, cols | dict(extra or {}), fmts, overwrite)
