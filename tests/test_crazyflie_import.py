@@ -152,7 +152,9 @@ def test_repeats_dropped_and_angles_at_30_hz(tmp_path):
     assert summary.repeats[0] == 60 * 8 and summary.repeats[1] == 0
     assert summary.kept == {0: 60 * 8, 1: 60 * 8}
     sel = (angles.lighthouse == 0) & (angles.axis == 0) & (angles.sensor == 2)
-    np.testing.assert_allclose(np.diff(angles.time[sel]), 1 / 30, atol=5e-5)
+    np.testing.assert_allclose(np.diff(angles.extra["log_time"][sel]), 1 / 30, atol=5e-5)
+    before = angles.extra["log_time"] - angles.time  # the hit precedes its logging
+    assert np.all((before > 0) & (before < 2.5 / 120))
     np.testing.assert_allclose(angles.extra["corrected_angle"] - angles.angle, 0.01, atol=1e-6)
 
 

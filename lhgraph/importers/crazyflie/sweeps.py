@@ -9,9 +9,11 @@ These repeats are the "extra" sweeps of station 0; they are dropped, the first l
 each measurement is kept. After that every station and sweep arrives every 33.3 ms (30 Hz),
 as LH1 with two stations must.
 
-Hit time: the firmware logs a pair about :data:`LOG_LATENCY_S` after the laser crossed the
-diode on the pair's last sweep (axis 1, measured against the deck's raw ``lhUartFrame``
-pulses); axis 0 was swept one slot (:data:`SLOT_S`) before axis 1.
+Hit time: the firmware logs a station's pair :data:`LOG_DELAY_S` after the sync flash that
+ends the slot of the pair's last sweep (axis 1; measured against the deck's raw
+``lhUartFrame`` pulses); within a slot the laser crosses a diode at ``T/4 + angle T/(2 pi)``
+after the slot's sync (SPEC §3, ``T`` = 1/60 s), and axis 0 was swept one slot
+(:data:`SLOT_S`) before axis 1.
 """
 
 from __future__ import annotations
@@ -24,10 +26,12 @@ from numpy.typing import NDArray
 from lhgraph.importers.crazyflie.usdlog import UsdLog
 from lhgraph.io.angles import Angles
 
-SLOT_S = 1.0 / 120.0
+ROTOR_PERIOD_S = 1.0 / 60.0
+SLOT_S = ROTOR_PERIOD_S / 2
 """One LH1 sweep slot (half a rotor turn), s."""
-LOG_LATENCY_S = 4.3e-3
-"""Delay from the axis-1 laser hit to the ``lhAngle`` event (median on the real log)."""
+LOG_DELAY_S = 0.18e-3
+"""Delay from the sync flash after a pair's last sweep to its ``lhAngle`` events (median on
+the real log, benchmarks/crazyflie_log_evidence.py)."""
 LH2_MAX_INTERVAL_S = 0.025
 """LH1 sweeps a station's axis every 33.3 ms; LH2 rotors turn every 18.5-20 ms."""
 
@@ -94,11 +98,13 @@ def lh1_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
     keep = ~repeat & finite
     k = a[keep]
     axis = k["sweep"].astype(np.int64)
-    time = t[keep] - LOG_LATENCY_S - (1 - axis) * SLOT_S
+    angle = k["angle"].astype(float)
+    in_slot = ROTOR_PERIOD_S / 4 + angle * ROTOR_PERIOD_S / (2 * np.pi)
+    time = t[keep] - LOG_DELAY_S - SLOT_S + in_slot - (1 - axis) * SLOT_S
     order = np.argsort(time, kind="stable")
     station = k["basestation"].astype(np.int64)
     angles = Angles(time[order], station[order], axis[order], k["sensor"].astype(np.int64)[order],
-                    k["angle"].astype(float)[order],
+                    angle[order],
                     {"corrected_angle": k["correctedAngle"].astype(float)[order],
                      "log_time": t[keep][order]})
     stations = np.unique(a["basestation"]).astype(int)
