@@ -418,6 +418,38 @@ def run_export(args: argparse.Namespace) -> int:
 COMMANDS.append(("export", add_export, run_export))
 
 
+# --- track ---
+
+
+def add_track(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("track", help="the receiver's path with the stations held fixed",
+                       description="Track the board through its angles with every station held "
+                       "at its pose in the stations TOML; write the trajectory CSV "
+                       "(docs/track.md).")
+    for flag, what in (("--stations", "stations TOML (held fixed)"), ("--angles", "angles CSV"),
+                       ("--board", "board TOML or built-in name (e.g. crazyflie_deck)"),
+                       ("--output", "trajectory CSV to write")):
+        p.add_argument(flag, required=True, help=what)
+    p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
+    p.add_argument("--streaming", action="store_true", help="one sync cycle at a time")
+    _add_common_output(p)
+    return p
+
+
+def run_track(args: argparse.Namespace) -> int:
+    from lhgraph.workflow.track import track_files
+
+    progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
+    out = track_files(args.board, args.angles, args.stations, args.output, args.calibration,
+                      args.streaming, args.force, progress=progress)
+    if not args.quiet:
+        print(out.summary())
+    return 0
+
+
+COMMANDS.append(("track", add_track, run_track))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``lhgraph`` argument parser with every registered command."""
     parser = argparse.ArgumentParser(

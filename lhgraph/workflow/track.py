@@ -1,0 +1,83 @@
+"""``lhgraph track``: the board's path with the stations held fixed, from files to a
+trajectory CSV (docs/track.md).
+
+:func:`track_files` checks the output and every input before the work (one line naming the
+file, nothing written), tracks in batch (:func:`lhgraph.estimation.graph.track.track`) or one
+sync cycle at a time (:func:`lhgraph.estimation.graph.streaming.track_stream`) and writes the
+contract trajectory CSV with the added columns ``lighthouse``, ``hits``, ``sigma_m``
+atomically.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lhgraph.errors import InputError
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.streaming import track_stream
+from lhgraph.estimation.graph.track import TrackedPath, track
+from lhgraph.io.angles import load_angles
+from lhgraph.io.files import check_writable
+from lhgraph.io.stations import load_stations
+from lhgraph.io.trajectory import save_trajectory
+from lhgraph.model.boards import board_by_name
+from lhgraph.workflow.inputs import station_models
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class TrackOutput:
+    """What :func:`track_files` did: the path, the file written, the mode, the wall time per
+    sync cycle (streaming; s) and the optimiser's status (batch)."""
+
+    path: TrackedPath
+    written: Path
+    streaming: bool
+    cycle_s: list[float]
+    status: str
+
+    def summary(self) -> str:
+        """One line: states, time span, how well determined, what was written."""
+        t = self.path.trajectory.time
+        sigma = np.median(self.path.sigma_m) * 1e3
+        how = (f"streaming, {len(self.cycle_s)} cycles, median update "
+               f"{np.median(self.cycle_s) * 1e3:.1f} ms" if self.streaming else self.status)
+        return (f"{len(t)} board states over {t[-1] - t[0]:.1f} s ({how}), median position "
+                f"sigma {sigma:.2f} mm; wrote {self.written}")
+
+
+def track_files(board: str | Path, angles: str | Path, stations: str | Path, output: str | Path,
+                calibration: str | Path | None = None, streaming: bool = False,
+                overwrite: bool = False, options: GraphOptions | None = None,
+                progress: Progress | None = None) -> TrackOutput:
+    """Track the board of ``board`` (a board TOML or a built-in name) through ``angles`` with
+    the stations of ``stations`` held fixed (factory calibration from ``calibration`` if
+    given, else the stations file's keys) and write the trajectory CSV ``output``."""
+    check_writable(output, overwrite)
+    if calibration is not None and not Path(calibration).is_file():
+        raise InputError("calibration file not found", calibration)
+    the_board = board_by_name(str(board), source="--board")
+    the_angles = load_angles(angles)
+    fixed = load_stations(stations)
+    missing = [s for s in the_angles.stations() if s not in fixed.stations]
+    if missing:
+        raise InputError(f"no [lighthouses.<index>] table for station(s) "
+                         f"{', '.join(map(str, missing))} seen in {angles}", stations)
+    models = station_models(calibration)
+    if streaming:
+        estimates = list(track_stream(the_board, the_angles, fixed, models, options))
+        if not estimates:
+            raise InputError("too short to track in streaming mode (no estimate after the "
+                             "warm-up)", angles)
+        path = TrackedPath.concatenate([e.path for e in estimates])
+        cycle_s, status = [e.update_s for e in estimates[1:]], "streaming"
+    else:
+        result = track(the_board, the_angles, fixed, models, options, progress=progress)
+        path, cycle_s, status = result.path, [], result.status
+    written = save_trajectory(path.trajectory, output, overwrite, path.columns())
+    return TrackOutput(path, written, streaming, cycle_s, status)
