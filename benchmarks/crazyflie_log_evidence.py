@@ -99,7 +99,8 @@ def main() -> None:
     # 3. calibration mapping
     out += ["", "## 3. Our correction of `angle` against the firmware's `correctedAngle`", "",
             "Pairs of one group (fresh station data), residual |ours - correctedAngle| (µrad).",
-            "", "| station | mapping | axis | p50 | p95 | p99 | pairs |", "|---|---|---|---|---|---|---|"]
+            "", "| station | mapping | axis | p50 | p95 | p99 | pairs |",
+            "|---|---|---|---|---|---|---|"]
     for bs in (0, 1):
         fresh = only0 if bs == 0 else both
         m = table[fresh, bs].transpose(0, 2, 1).reshape(-1, 2)
