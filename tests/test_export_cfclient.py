@@ -275,3 +275,17 @@ def test_no_still_period_falls_back_to_all_samples(tmp_path):
     with pytest.raises(InputError, match="no still IMU sample"):
         up_from_imu(stream[:, 0], stream[:, 1:4], stream[:, 4:7], traj,
                     WorldOptions(imu_samples="still"))
+
+
+def test_an_imu_in_the_wrong_frame_is_flagged(tmp_path):
+    stations, _ = _write_setup(tmp_path)
+    imu, trajectory, _ = _hand_held(tmp_path)
+    stream = np.loadtxt(imu, delimiter=",", skiprows=1)
+    turned = write_csv_columns(tmp_path / "turned.csv", {  # axes x <- z, z <- -x
+        "time": stream[:, 0], "ax": stream[:, 3], "ay": stream[:, 2], "az": -stream[:, 1]},
+        {}, False)
+    # (samples at rest in one orientation cannot reveal a wrong frame: the motion can)
+    result = export_cfclient(stations, tmp_path / "a.yaml", imu=turned, trajectory=trajectory,
+                             options=WorldOptions(imu_samples="all"))
+    assert result.alignment.up.consistency < 0.9
+    assert any("agree poorly" in w for w in result.warnings)
