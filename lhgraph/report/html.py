@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import base64
 import html
-import io
 import json
 from typing import Any
 
@@ -21,6 +20,7 @@ from numpy.typing import NDArray
 from lhgraph.estimation.result import Residuals, SolveResult
 from lhgraph.io.angles import Angles
 from lhgraph.io.stations import Stations
+from lhgraph.report.figures import png_bytes
 
 ELLIPSOID_SCALE = 100.0
 AXIS_LENGTH_M = 0.3
@@ -33,9 +33,7 @@ text-align:right}th{background:#eee}img{max-width:100%}pre{background:#f6f6f6;pa
 
 def png_tag(fig: Figure, alt: str) -> str:
     """``<img>`` with the figure as an embedded base64 PNG."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
-    data = base64.b64encode(buf.getvalue()).decode()
+    data = base64.b64encode(png_bytes(fig, 90)).decode()
     return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
 
 

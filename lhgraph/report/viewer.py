@@ -23,6 +23,7 @@ from lhgraph.io.files import check_writable, write_atomic
 from lhgraph.io.stations import load_stations
 from lhgraph.io.trajectory import load_trajectory
 from lhgraph.model.board import Board, load_board
+from lhgraph.report.figures import png_bytes
 
 FRUSTUM_DEPTH_M = 1.0
 FRUSTUM_HALF_ANGLE_DEG = 60.0  # the stations' sweep field of view per axis
@@ -170,7 +171,6 @@ def _bounds(scene: Scene) -> tuple[NDArray, NDArray]:
 def png_matplotlib(scene: Scene, path: str | Path, overwrite: bool = False) -> Path:
     """Render the scene's segments and points with matplotlib (no display, no GPU) into a
     PNG file (written atomically; an existing file only replaced when ``overwrite``)."""
-    import io
 
     from matplotlib.figure import Figure
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
@@ -189,9 +189,7 @@ def png_matplotlib(scene: Scene, path: str | Path, overwrite: bool = False) -> P
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-    return write_atomic(path, buf.getvalue(), overwrite)
+    return write_atomic(path, png_bytes(fig, 100), overwrite)
 
 
 def export(scene: Scene, path: str | Path, overwrite: bool = False,

@@ -32,6 +32,7 @@ from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.geometry.transforms import euler_zyx
 from lhgraph.io.files import read_toml, write_atomic
 from lhgraph.io.stations import Stations
+from lhgraph.report.figures import png_bytes
 from lhgraph.sim.simulate import SimulationConfig, paper_protocol, simulate
 from lhgraph.workflow.solve import solve
 from lhgraph.workflow.solve_config import check_methods
@@ -316,9 +317,8 @@ def _scatter(records: list[dict[str, Any]], key: str, xlabel: str, path: Path) -
     ax.set_ylabel("position error (mm)")
     ax.legend()
     ax.grid(alpha=0.3)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90, bbox_inches="tight")
-    return path
+    # the study's own plot, redrawn on every run of the study
+    return write_atomic(path, png_bytes(fig, 90), overwrite=True)
 
 
 def _pairwise(methods: list[str], records: list[dict[str, Any]]) -> list[str]:

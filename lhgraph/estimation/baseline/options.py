@@ -3,38 +3,16 @@
 
 from __future__ import annotations
 
-import dataclasses
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
-from lhgraph.config import RULE, Rule, check_fields, option
+from lhgraph.config import check_fields, option
 from lhgraph.estimation.reconstruct import VARIANTS
 
 Progress = Callable[[str, int, int], None]
 """``progress(stage, done, total)``: called as work advances (stage is a short label)."""
 
 KABSCH_POINTS = ("board", "sensors")
-
-
-@dataclass(frozen=True)
-class _InfinityAllowed(Rule):
-    """A :class:`~lhgraph.config.Rule` for a float that may also be ``inf`` (switched off)."""
-
-    def allowed(self) -> str:
-        return super().allowed() + " or inf"
-
-    def check(self, value: Any, source: str | Path | None, where: str) -> Any:
-        if isinstance(value, float) and value == math.inf:
-            return value
-        return super().check(value, source, where)
-
-
-def _count_of_mads(default: float) -> Any:
-    """A dataclass field for a threshold in robust standard deviations: > 0, ``inf`` = off."""
-    return dataclasses.field(default=default, metadata={RULE: _InfinityAllowed(float, gt=0)})
 
 
 @dataclass(frozen=True)
@@ -71,7 +49,7 @@ class PaperOptions:
     mirror_check: bool = option(True)
     min_sensors: int = option(6, ge=4)
     min_measurements: int = option(10, ge=3)
-    outlier_mads: float = _count_of_mads(5.0)
+    outlier_mads: float = option(5.0, gt=0, finite=False)  # inf: no outlier rejection
     kabsch_points: str = option("board", choices=KABSCH_POINTS)
     weight_floor: float = option(0.1, ge=0)
     pose_xatol: float = option(1e-6, gt=0)
