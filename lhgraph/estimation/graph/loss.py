@@ -19,9 +19,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
+from lhgraph.estimation.graph.options import LOSSES
 
 Array = NDArray[np.float64]
-LOSSES = ("cauchy", "huber")
 
 
 @dataclass(frozen=True)
@@ -33,7 +33,8 @@ class RobustLoss:
 
     def __post_init__(self) -> None:
         if self.kind not in LOSSES:
-            raise SolverError(f"unknown loss '{self.kind}' (expected huber or cauchy)")
+            raise SolverError(f"unknown loss '{self.kind}' (expected one of "
+                              f"{', '.join(LOSSES)})")
 
     def estimator(self) -> gtsam.noiseModel.mEstimator.Base:
         """GTSAM's m-estimator of this loss, reweighting each residual row on its own."""
