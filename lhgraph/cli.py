@@ -432,6 +432,8 @@ def add_track(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         p.add_argument(flag, required=True, help=what)
     p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
     p.add_argument("--streaming", action="store_true", help="one sync cycle at a time")
+    p.add_argument("--delay", type=float, metavar="S",
+                   help="streaming: report each state S seconds after it (docs/track.md)")
     _add_common_output(p)
     return p
 
@@ -441,7 +443,7 @@ def run_track(args: argparse.Namespace) -> int:
 
     progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
     out = track_files(args.board, args.angles, args.stations, args.output, args.calibration,
-                      args.streaming, args.force, progress=progress)
+                      args.streaming, args.force, progress=progress, delay_s=args.delay)
     if not args.quiet:
         print(out.summary())
     return 0

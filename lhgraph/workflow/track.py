@@ -18,7 +18,7 @@ import numpy as np
 
 from lhgraph.errors import InputError
 from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.streaming import track_stream
+from lhgraph.estimation.graph.streaming import DELAY_S, track_stream
 from lhgraph.estimation.graph.track import TrackedPath, track
 from lhgraph.io.angles import load_angles
 from lhgraph.io.files import check_writable
@@ -54,11 +54,18 @@ class TrackOutput:
 def track_files(board: str | Path, angles: str | Path, stations: str | Path, output: str | Path,
                 calibration: str | Path | None = None, streaming: bool = False,
                 overwrite: bool = False, options: GraphOptions | None = None,
-                progress: Progress | None = None) -> TrackOutput:
+                progress: Progress | None = None, delay_s: float | None = None
+                ) -> TrackOutput:
     """Track the board of ``board`` (a board TOML or a built-in name) through ``angles`` with
     the stations of ``stations`` held fixed (factory calibration from ``calibration`` if
-    given, else the stations file's keys) and write the trajectory CSV ``output``."""
+    given, else the stations file's keys) and write the trajectory CSV ``output``;
+    ``streaming``: per sync cycle, each state as estimated ``delay_s`` after it (default
+    :data:`~lhgraph.estimation.graph.streaming.DELAY_S`)."""
     check_writable(output, overwrite)
+    delay_s = DELAY_S if delay_s is None else delay_s
+    if not 0 <= delay_s < 0.5:
+        raise InputError(f"must be in [0, 0.5) s, the smoother's lag (got {delay_s:g})",
+                         "--delay")
     if calibration is not None and not Path(calibration).is_file():
         raise InputError("calibration file not found", calibration)
     the_board = board_by_name(str(board), source="--board")
@@ -70,12 +77,13 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
                          f"{', '.join(map(str, missing))} seen in {angles}", stations)
     models = station_models(calibration)
     if streaming:
-        estimates = list(track_stream(the_board, the_angles, fixed, models, options))
+        estimates = list(track_stream(the_board, the_angles, fixed, models, options,
+                                      delay_s=delay_s))
         if not estimates:
             raise InputError("too short to track in streaming mode (no estimate after the "
                              "warm-up)", angles)
-        path = TrackedPath.concatenate([e.path for e in estimates])
-        cycle_s, status = [e.update_s for e in estimates[1:]], "streaming"
+        path = TrackedPath.concatenate([e.path for e in estimates if e.path])
+        cycle_s, status = [e.update_s for e in estimates[1:-1]], "streaming"
     else:
         result = track(the_board, the_angles, fixed, models, options, progress=progress)
         path, cycle_s, status = result.path, [], result.status

@@ -17,6 +17,7 @@ the window, not the capture, sets the cost).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
@@ -54,17 +55,22 @@ from lhgraph.estimation.residuals import (
 from lhgraph.geometry.transforms import se3_exp
 from lhgraph.io.angles import Angles
 from lhgraph.io.stations import Stations
+from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.board import Board
 from lhgraph.model.lh1 import StationModel
 
 Array = NDArray[np.float64]
+DELAY_S = 0.1
+"""Default age at which a tracked state is reported (three sync cycles: a few-diode receiver's
+depth from one station is poor, the other station's sweeps of the next cycles fix it)."""
 
 
 @dataclass(frozen=True)
 class StreamingEstimate:
     """Station poses ``T_world_lh`` (index -> 4x4) and covariances after an update; when
-    tracking, ``path``: the board states the update added (the warm-up: all of its own), each
-    as estimated then (filtered, not smoothed by later data)."""
+    tracking, ``path``: the board states reported by the update (the warm-up: all of its own;
+    then those at least ``delay_s`` old, each as estimated then: smoothed by the data of that
+    delay only; None when none is due)."""
 
     time: float
     stations: dict[int, Array]
@@ -133,17 +139,23 @@ def _isam2_params() -> gtsam.ISAM2Params:
 class StreamingSolver:
     """Incremental calibration of the stations in ``station_ids`` (first = reference), or,
     with ``stations``, tracking with every one of them held at its pose there (the world is
-    the stations file's; ``models`` default to its own)."""
+    the stations file's; ``models`` default to its own), each board state reported once it is
+    ``delay_s`` old (< ``lag_s``; :meth:`flush` reports the rest at the end)."""
 
     def __init__(self, board: Board, station_ids: list[int],
                  models: dict[int, StationModel] | None = None,
                  options: GraphOptions | None = None, lag_s: float = 0.5,
-                 warmup_s: float = 1.0, stations: Stations | None = None):
+                 warmup_s: float = 1.0, stations: Stations | None = None,
+                 delay_s: float = 0.0):
         self.board = board
         self.station_ids = list(station_ids)
         self.stations = stations
         self._T_world_lh = (None if stations is None
                             else station_slot_poses(stations, self.station_ids))
+        if not 0 <= delay_s < lag_s:
+            raise SolverError(f"delay_s must be in [0, lag_s = {lag_s:g}) (got {delay_s:g})")
+        self.delay_s = delay_s
+        self._queue: list[tuple[int, TrackedPath]] = []  # (first state, states) unreported
         self.models = models or {}
         if stations is not None:
             self.models = {s: stations.stations[s].model for s in self.station_ids} | self.models
@@ -202,6 +214,11 @@ class StreamingSolver:
             path = batch.path
         self._psd = (batch.diagnostics.get("accel_psd_rot", self._psd[0]),
                      batch.diagnostics.get("accel_psd_pos", self._psd[1]))
+        if path is not None:
+            # a filter predicts: never stiffer than the configured start, which the warm-up's
+            # smoothing adaptation may undercut (on a fast hand-held deck: twice the error)
+            self._psd = (max(self._psd[0], self.options.accel_psd_rot),
+                         max(self._psd[1], self.options.accel_psd_pos))
         self._sigma = batch.diagnostics.get("angle_sigma_rad", self._sigma)
         self._smoother = gtsam.IncrementalFixedLagSmoother(self.lag_s, _isam2_params())
         graph = gtsam.NonlinearFactorGraph()
@@ -273,16 +290,44 @@ class StreamingSolver:
         t_now = self._last[0]
         for slot in range(1, 1 if tracking else len(self.station_ids)):
             stamps.insert((STATION_POSE.key(slot), t_now))
+        # after a gap, queued states this update marginalises are reported first, younger
+        early = (self._report(self._smoother.calculateEstimate(), t_now - self.lag_s + 0.05, 0)
+                 if tracking and self._queue
+                 and self._queue[0][1].trajectory.time[0] < t_now - self.lag_s + 0.05 else None)
         self._smoother.update(graph, values, stamps)
         current = self._smoother.calculateEstimate()
         self._last = (t_now, current.atPose3(BOARD_POSE.key(self._k - 1)).matrix(),
                       current.atVector(BOARD_TWIST.key(self._k - 1)))
         if not tracking:
             return None
-        keys = [BOARD_POSE.key(k) for k in range(first, self._k)]
-        T = np.stack([current.atPose3(key).matrix() for key in keys])
-        cov = np.stack([self._smoother.marginalCovariance(key)[3:, 3:] for key in keys])
-        return path_of(problem, T, np.sqrt(np.linalg.eigvalsh(cov)[:, -1]))
+        K = problem.n_states
+        self._queue.append((first, path_of(problem, np.zeros((K, 4, 4)), np.zeros(K))))
+        due = [p for p in (early, self._report(current, t_now - self.delay_s)) if p]
+        return TrackedPath.concatenate(due) if due else None
+
+    def _report(self, values: gtsam.Values, until: float, end: int = -1) -> TrackedPath | None:
+        """The queued states of every update whose last (``end=0``: first) state is not after
+        ``until``, at their estimates in ``values`` with their position sigmas (None if
+        none)."""
+        ready = [q for q in self._queue if q[1].trajectory.time[end] <= until]
+        if not ready:
+            return None
+        self._queue = self._queue[len(ready):]
+        parts = []
+        for first, states in ready:
+            keys = [BOARD_POSE.key(k) for k in range(first, first + len(states.hits))]
+            T = np.stack([values.atPose3(key).matrix() for key in keys])
+            cov = np.stack([self._smoother.marginalCovariance(key)[3:, 3:] for key in keys])
+            parts.append(dataclasses.replace(
+                states, trajectory=Trajectory(states.trajectory.time, T),
+                sigma_m=np.sqrt(np.linalg.eigvalsh(cov)[:, -1])))
+        return TrackedPath.concatenate(parts)
+
+    def flush(self) -> StreamingEstimate:
+        """The estimate with every state not reported yet (tracking, at the end of a stream)."""
+        if self._smoother is None:
+            raise SolverError("no estimate yet: still warming up")
+        return self.estimate(0.0, self._report(self._smoother.calculateEstimate(), np.inf))
 
 
 def _concat(chunks: list[Angles]) -> Angles:
@@ -296,16 +341,20 @@ def _concat(chunks: list[Angles]) -> Angles:
 def track_stream(board: Board, angles: Angles, stations: Stations,
                  models: dict[int, StationModel] | None = None,
                  options: GraphOptions | None = None, lag_s: float = 0.5,
-                 warmup_s: float = 0.5) -> Iterator[StreamingEstimate]:
+                 warmup_s: float = 0.5, delay_s: float = DELAY_S
+                 ) -> Iterator[StreamingEstimate]:
     """Track the board through ``angles`` one sync cycle at a time (:func:`cycles`) with every
     station held at its pose in ``stations``: one estimate per cycle after the warm-up, its
-    ``path`` the states that cycle added (the first: the warm-up's batch path)."""
+    ``path`` the states that became ``delay_s`` old (the first: the warm-up's batch path),
+    and a last one with the states still unreported."""
     solver = StreamingSolver(board, angles.stations(), models, options, lag_s, warmup_s,
-                             stations)
+                             stations, delay_s)
     for chunk in cycles(angles):
         estimate = solver.add(chunk)
         if estimate is not None:
             yield estimate
+    if solver._smoother is not None:
+        yield solver.flush()
 
 
 def cycles(angles: Angles, cycle_s: float = 4 / 120.0) -> Iterator[Angles]:
