@@ -13,7 +13,8 @@ MAX_LINES = 450
 
 # the rank of each subpackage: a module imports from its own rank or lower ones only
 LAYERS = {
-    "errors": 0, "choices": 0, "geometry": 1, "config": 2, "model": 2, "io": 2, "signal": 3, "device": 3,
+    "errors": 0, "choices": 0, "geometry": 1, "config": 2, "model": 2, "io": 2,
+    "signal": 3, "device": 3,
     "estimation": 4, "sim": 4, "importers": 5, "report": 6, "workflow": 7, "cli": 8,
 }
 
