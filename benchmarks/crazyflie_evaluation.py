@@ -11,9 +11,12 @@ marker on/off events (``mocap.csv`` of ``lhgraph import crazyflie``), then a sea
 +-100 ms at both ends (offset and clock rate) for the smallest rigid-fit (Kabsch) residual;
 percentiles of the position error after the best rigid fit.
 
-(a) ``--track T.csv``: a trajectory CSV (``lhgraph track`` output, board frame = the deck)
-evaluated the same way (positions only). ``lhgraph track`` is not in the tree yet: pass its
-output when it is.
+(a) ``--track NAME=T.csv``: a trajectory CSV (``lhgraph track`` output with the same
+stations TOML, its ``ootx.toml`` and ``crazyflie_deck``) evaluated the same way (positions
+only). Tracking takes minutes, so it is run beforehand and passed in, e.g.
+
+    lhgraph track --stations DIR/stations-cfclient.toml --angles DIR/angles.csv \
+        --board crazyflie_deck --calibration DIR/ootx.toml --output DIR/track-cfclient.csv
 
     python3 benchmarks/crazyflie_evaluation.py [--import-dir DIR] \
         [--stations NAME=FILE ...] [--track NAME=T.csv ...]
@@ -194,8 +197,7 @@ def main() -> None:
             e, d0, d1 = aligned_errors(tr.time, tr.T_world_board[:, :3, 3], t_m, p_m)
             lines.append(row(name, e, d0, d1, len(e)))
     else:
-        lines.append("Not measured: no `--track` trajectory given (`lhgraph track` was not in "
-                     "the tree when this was run).")
+        lines.append("Not measured: no `--track` trajectory given.")
     lines += ["", f"Run time: {time.perf_counter() - start:.1f} s.", ""]
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text("\n".join(lines))
