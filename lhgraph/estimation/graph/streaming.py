@@ -33,6 +33,7 @@ from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.graph.track import (
     TrackedPath,
+    largest_sigma,
     path_of,
     station_slot_poses,
     track,
@@ -317,10 +318,10 @@ class StreamingSolver:
         for first, states in ready:
             keys = [BOARD_POSE.key(k) for k in range(first, first + len(states.hits))]
             T = np.stack([values.atPose3(key).matrix() for key in keys])
-            cov = np.stack([self._smoother.marginalCovariance(key)[3:, 3:] for key in keys])
+            cov = np.stack([self._smoother.marginalCovariance(key) for key in keys])
             parts.append(dataclasses.replace(
                 states, trajectory=Trajectory(states.trajectory.time, T),
-                sigma_m=np.sqrt(np.linalg.eigvalsh(cov)[:, -1])))
+                sigma_m=largest_sigma(cov)))
         return TrackedPath.concatenate(parts)
 
     def flush(self) -> StreamingEstimate:

@@ -211,10 +211,16 @@ def snapshot_poses(problem: GraphProblem, X: Array, V: Array, T_world_lh: Array,
     return X
 
 
+def largest_sigma(pose_covariances: Array) -> Array:
+    """The largest position standard deviation (m) of each pose covariance (n, 6, 6)
+    (tangent order [rx, ry, rz, tx, ty, tz]; the translation block's eigenvalues do not
+    depend on the frame it is expressed in)."""
+    return np.sqrt(np.linalg.eigvalsh(pose_covariances[:, 3:, 3:])[:, -1])
+
+
 def position_sigmas(fit: OptimizerResult, n_states: int) -> Array:
     """Per state, the largest position standard deviation (m) of its marginal covariance."""
-    cov = np.stack([fit.covariance(BOARD_POSE.key(k))[3:, 3:] for k in range(n_states)])
-    return np.sqrt(np.linalg.eigvalsh(cov)[:, -1])
+    return largest_sigma(np.stack([fit.covariance(BOARD_POSE.key(k)) for k in range(n_states)]))
 
 
 def track(board: Board, angles: Angles, stations: Stations,
