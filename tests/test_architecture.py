@@ -4,6 +4,7 @@ concept (short), no import cycles, the layers importing only downwards."""
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -19,32 +20,45 @@ LAYERS = {
 }
 
 
+@functools.cache
 def modules() -> dict[str, Path]:
     return {".".join(("lhgraph", *p.relative_to(PACKAGE).with_suffix("").parts))
             .removesuffix(".__init__"): p for p in PACKAGE.rglob("*.py")}
 
 
+def imported(node: ast.ImportFrom | ast.Import) -> set[str]:
+    """The lhgraph modules one import statement loads (``from lhgraph.x import y`` loads
+    ``lhgraph.x.y`` when that is a module, else ``lhgraph.x``)."""
+    if isinstance(node, ast.Import):
+        return {a.name for a in node.names if a.name.startswith("lhgraph")}
+    if not node.module or node.level or not node.module.startswith("lhgraph"):
+        return set()
+    mods = modules()
+    return {f"{node.module}.{a.name}" if f"{node.module}.{a.name}" in mods else node.module
+            for a in node.names}
+
+
 def module_imports(path: Path) -> set[str]:
     """lhgraph modules imported at module level (outside functions and TYPE_CHECKING)."""
     out: set[str] = set()
-    tree = ast.parse(path.read_text())
-    for node in tree.body:
+    for node in ast.parse(path.read_text()).body:
         if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
             continue
-        for sub in ast.walk(node) if not isinstance(node, ast.FunctionDef | ast.ClassDef) \
-                else []:
-            if isinstance(sub, ast.ImportFrom) and sub.module and sub.level == 0 \
-                    and sub.module.startswith("lhgraph"):
-                out.add(sub.module)
-            elif isinstance(sub, ast.Import):
-                out.update(a.name for a in sub.names if a.name.startswith("lhgraph"))
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            continue
+        for sub in ast.walk(node):
+            if isinstance(sub, ast.ImportFrom | ast.Import):
+                out |= imported(sub)
     return out
 
 
 def all_imports(path: Path) -> set[str]:
     """Every lhgraph module ``path`` imports, at module level, in functions or for typing."""
-    return {n.module for n in ast.walk(ast.parse(path.read_text()))
-            if isinstance(n, ast.ImportFrom) and n.module and n.module.startswith("lhgraph.")}
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom | ast.Import):
+            out |= imported(node)
+    return out
 
 
 def layer(module: str) -> int:

@@ -1,0 +1,157 @@
+"""Commands that make and calibrate captures: ``simulate``, ``solve``, ``study``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from lhgraph.cli.common import COMMANDS, add_common_output
+
+# --- simulate ---
+
+
+def add_simulate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("simulate", help="simulate a capture with known truth",
+                       description="Simulate a capture of a waved board (docs/simulator.md) and "
+                       "write angles.csv, board.toml, truth.toml and trajectory.csv.")
+    p.add_argument("config", nargs="?", help="simulation TOML (default: the bundled default)")
+    p.add_argument("--output", "-o", required=True, help="output directory")
+    p.add_argument("--seed", type=int, help="random seed (overrides the config's seed)")
+    p.add_argument("--capture", action="store_true",
+                   help="also write the raw signal a board would record (capture.lhcap)")
+    add_common_output(p)
+    return p
+
+
+def run_simulate(args: argparse.Namespace) -> int:
+    from lhgraph.sim.simulate import (
+        default_simulation_config,
+        load_simulation_config,
+        simulate,
+        write_simulation,
+    )
+
+    config = (default_simulation_config() if args.config is None
+              else load_simulation_config(args.config))
+    capture = simulate(config, args.seed)
+    paths = write_simulation(capture, args.output, args.force, raw_capture=args.capture)
+    if not args.quiet:
+        print(f"{capture.summary()}; wrote {', '.join(p.name for p in paths.values())} "
+              f"to {args.output}")
+    return 0
+
+
+COMMANDS.append(("simulate", add_simulate, run_simulate))
+
+
+# --- solve ---
+
+
+def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from lhgraph.choices import METHODS, WORLDS
+
+    p = sub.add_parser("solve", help="calibrate the station poses",
+                       description="Calibrate the stations' poses from a board capture's angles "
+                       "(docs/solve.md). Either a CONFIG.toml or --board/--angles/--output.")
+    p.add_argument("config", nargs="?", help="solve configuration TOML")
+    p.add_argument("--board", help="board TOML")
+    p.add_argument("--angles", help="angles CSV")
+    p.add_argument("--output", "-o", help="stations TOML to write (with a CONFIG: a path "
+                   "without .toml or an existing directory = a run directory, docs/workflow.md)")
+    p.add_argument("--method", choices=METHODS, help="default: graph")
+    p.add_argument("--trajectory", help="also write the board trajectory CSV")
+    p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
+    p.add_argument("--truth", help="true stations TOML: print the errors")
+    p.add_argument("--reference", type=int, help="station index of the world frame")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="solve only the first S seconds in which the board moves")
+    p.add_argument("--world", choices=WORLDS,
+                   help="world frame: the reference station's (default) or gravity-aligned, "
+                   "z up from the stations' OOTX accelerometer vectors")
+    add_common_output(p)
+    return p
+
+
+def run_solve(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+    from pathlib import Path
+
+    from lhgraph.config import override
+    from lhgraph.errors import InputError
+    from lhgraph.report.text import format_comparison, print_solution
+    from lhgraph.workflow.rundir import comparison_rows, is_run_directory, run_to_directory
+    from lhgraph.workflow.solve import solve_to_files
+    from lhgraph.workflow.solve_config import SolveConfig, load_solve_config
+
+    flags = {f"--{name}": (name, getattr(args, name))
+             for name in ("output", "method", "trajectory", "calibration", "truth", "reference",
+                          "world")}
+    flags["--duration"] = ("duration_s", args.duration)
+    if args.config:
+        config = load_solve_config(args.config)
+    else:
+        missing = [o for o in ("board", "angles", "output") if getattr(args, o) is None]
+        if missing:
+            raise InputError("give a CONFIG.toml or all of --board, --angles, --output "
+                             f"(missing: {', '.join('--' + m for m in missing)})")
+        config = SolveConfig(board=Path(args.board))
+        flags["--angles"] = ("angles", args.angles)
+    config = override(config, flags)
+    if args.method is not None:
+        config = replace(config, methods=None)
+    if config.output is None:
+        raise InputError("no output: give --output or set 'output' in the config")
+    progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
+    if args.config and is_run_directory(config.output):
+        run = run_to_directory(config, config.output, args.force, progress)
+        if not args.quiet:
+            for r in run.runs:
+                print_solution(r.result, r.errors)
+            if len(run.runs) > 1:
+                print(format_comparison(comparison_rows(run.runs)))
+            print(f"wrote {len(run.files)} files to {run.directory}; report: {run.report}")
+        return 0
+    result, errors, written = solve_to_files(config, args.force, progress)
+    if not args.quiet:
+        print_solution(result, errors)
+        print(f"wrote {', '.join(str(p) for p in written)}")
+    return 0
+
+
+COMMANDS.append(("solve", add_solve, run_solve))
+
+
+# --- study ---
+
+
+def add_study(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("study", help="run a simulation protocol with several methods",
+                       description="Simulate every capture of a study's protocol, solve it with "
+                       "each method (resumable: results kept in DIR/results/) and write the "
+                       "Table III comparison and plots (docs/workflow.md).")
+    p.add_argument("config", help="study TOML (e.g. configs/study_small.toml)")
+    p.add_argument("--output", "-o", required=True, help="study directory")
+    p.add_argument("--jobs", "-j", type=int, default=1, help="parallel processes (default 1)")
+    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of "
+                   "local processes (needs lhgraph[dask])")
+    p.add_argument("--force", action="store_true",
+                   help="rerun every capture even when its result is stored")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    return p
+
+
+def run_study(args: argparse.Namespace) -> int:
+    from lhgraph.workflow.study import load_study_config
+    from lhgraph.workflow.study import run_study as study
+
+    progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
+    result = study(load_study_config(args.config), args.output, args.jobs, args.scheduler,
+                   rerun=args.force, progress=progress)
+    if not args.quiet:
+        print(next(f for f in result.files if f.name == "study.md").read_text())
+        print(f"ran {result.ran}, reused {result.skipped}; wrote "
+              f"{', '.join(str(f) for f in result.files)}")
+    return 0
+
+
+COMMANDS.append(("study", add_study, run_study))

@@ -1,0 +1,22 @@
+"""What every command module shares: the registry of commands and the common output flags.
+
+Each command is a pair ``add_<name>(subparsers)`` / ``run_<name>(args) -> int`` registered in
+:data:`COMMANDS` by its module (the order of the modules' imports in :mod:`lhgraph.cli` is the
+order of ``lhgraph --help``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+Runner = Callable[[argparse.Namespace], int]
+Adder = Callable[[argparse._SubParsersAction], argparse.ArgumentParser]
+
+COMMANDS: list[tuple[str, Adder, Runner]] = []
+
+
+def add_common_output(p: argparse.ArgumentParser) -> None:
+    """``--force`` and ``--quiet``, the flags of every command that writes files."""
+    p.add_argument("--force", action="store_true", help="overwrite existing output files")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
