@@ -20,6 +20,7 @@ from lhgraph.errors import InputError
 from lhgraph.io.files import as_float, as_int, as_matrix, as_vector, get_key, read_toml
 from lhgraph.model.boards import board_by_name
 from lhgraph.model.lh1 import CALIBRATION_KEYS, FactoryCalibration, StationModel
+from lhgraph.sim.deck_log import LoggingConfig
 from lhgraph.sim.layout import ParametricLayout, parametric_scene
 from lhgraph.sim.motion import PATTERNS
 
@@ -68,7 +69,8 @@ class SimulationConfig:
     replaces ``layout`` when given;
     ``station_models`` maps station index -> factory calibration and rotor offsets;
     ``first_station`` None = drawn at random; ``clock_ppm`` = how much longer the stations'
-    rotor period is on the board's clock (ppm), None = drawn at random in +-30 ppm.
+    rotor period is on the board's clock (ppm), None = drawn at random in +-30 ppm;
+    ``logging`` = how the receiver logs its hits (:class:`LoggingConfig`).
     """
 
     duration_s: float = 8.0
@@ -84,6 +86,7 @@ class SimulationConfig:
     clock_ppm: float | None = None
     seed: int = 0
     base_dir: str | None = None
+    logging: LoggingConfig = field(default_factory=LoggingConfig)
 
     @property
     def n_stations(self) -> int:
@@ -235,10 +238,11 @@ def parse_simulation_config(data: dict[str, Any], source: str | Path,
     v.finish()
 
     models = _parse_factory(top.get("factory", {}), source, n_stations)
+    logging = top.options("logging", LoggingConfig)
     top.finish()
     return SimulationConfig(duration, fs, board, layout, stations, motion, noise, visibility,
                             models, first_station, clock_ppm, seed,
-                            None if base_dir is None else str(base_dir))
+                            None if base_dir is None else str(base_dir), logging)
 
 
 def load_simulation_config(path: str | Path) -> SimulationConfig:

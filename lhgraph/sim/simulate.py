@@ -34,6 +34,7 @@ from lhgraph.sim.config import (
     paper_protocol,
     parse_simulation_config,
 )
+from lhgraph.sim.deck_log import log_like_deck
 from lhgraph.sim.layout import Scene, parametric_scene, scene_from_poses
 from lhgraph.sim.motion import Motion, facing_rotation, make_motion
 
@@ -233,7 +234,16 @@ def simulate(config: SimulationConfig, seed: int | None = None) -> SimulatedCapt
     centre = (start + end) / 2
     Ts = slots.period_samples
     angle = (centre - slots.sync_start_sample[k, station] - Ts / 4) * 2 * np.pi / Ts
-    angles = Angles(centre / fs, station.astype(np.int64), axis.astype(np.int64),
+    time = centre / fs
+    if config.logging.timestamps == "deck":  # the deck's log: cycles kept, stamped together
+        kept, time = log_like_deck(config.logging, k, phase, period_s / 2,
+                                   board.positions[row, 0], board.ids[row], axis,
+                                   sync_s[k, station] + period_s / 4, rng)
+        order = np.flatnonzero(kept)[np.argsort(time, kind="stable")]
+        time = np.sort(time, kind="stable")
+        k, row, station, axis, start, end, reflected, angle = (
+            x[order] for x in (k, row, station, axis, start, end, reflected, angle))
+    angles = Angles(time, station.astype(np.int64), axis.astype(np.int64),
                     board.ids[row], angle, {"sweep": k.astype(np.int64)})
     kind = np.where(reflected, LightPulses.REFLECTION, LightPulses.SWEEP).astype(np.int64)
     pulses = LightPulses(board.ids[row], start, end, kind)
