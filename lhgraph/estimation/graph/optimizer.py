@@ -68,12 +68,13 @@ class LMParams:
     step_tolerance_sigma: float = 0.05
     board_step_tolerance_rad: float = 1e-3
     board_step_tolerance_m: float = 1e-4
+    board_step_quantile: float = 1.0
 
     @classmethod
     def from_options(cls, options: GraphOptions) -> LMParams:
         return cls(options.max_iterations, options.relative_tolerance,
                    options.step_tolerance_sigma, options.board_step_tolerance_rad,
-                   options.board_step_tolerance_m)
+                   options.board_step_tolerance_m, options.board_step_quantile or 1.0)
 
 
 @dataclass(frozen=True)
@@ -113,11 +114,15 @@ def remaining_sigmas(step: float, previous: float | None) -> float:
     return step * rho / (1.0 - rho)
 
 
-def largest_board_step(delta: gtsam.VectorValues, layout: VariableLayout) -> tuple[float, float]:
-    """Largest rotation (rad) and translation (m) step of any board pose in ``delta``."""
+def largest_board_step(delta: gtsam.VectorValues, layout: VariableLayout,
+                       quantile: float = 1.0) -> tuple[float, float]:
+    """Largest rotation (rad) and translation (m) step of any board pose in ``delta`` (with
+    ``quantile`` < 1: that quantile of the board poses' steps)."""
     step = layout.read_steps(delta, BOARD_POSE)
-    return (float(np.max(np.linalg.norm(step[:, :3], axis=1))),
-            float(np.max(np.linalg.norm(step[:, 3:], axis=1))))
+    rot, pos = np.linalg.norm(step[:, :3], axis=1), np.linalg.norm(step[:, 3:], axis=1)
+    if quantile >= 1.0:
+        return float(np.max(rot)), float(np.max(pos))
+    return float(np.quantile(rot, quantile)), float(np.quantile(pos, quantile))
 
 
 def _root_step_sigmas(tree: gtsam.GaussianBayesTree, delta: gtsam.VectorValues,
@@ -188,7 +193,7 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
         if rescaled:
             error = cost(values)
         remaining = remaining_sigmas(station_step, previous_step)
-        board_rad, board_m = largest_board_step(delta, layout)
+        board_rad, board_m = largest_board_step(delta, layout, params.board_step_quantile)
         board_settled = (board_rad < params.board_step_tolerance_rad
                          and board_m < params.board_step_tolerance_m)
         small = (improvement < params.relative_tolerance * max(error, 1.0)
