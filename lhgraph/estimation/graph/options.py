@@ -8,6 +8,7 @@ from lhgraph.config import check_fields, option
 
 LOSSES = ("cauchy", "huber")
 SOLVERS = ("lm", "isam2")
+SWEEP_TIMES = ("auto", "stamped")
 
 
 @dataclass(frozen=True)
@@ -32,8 +33,18 @@ class GraphOptions:
     ``relative_tolerance``;
     ``reference``: station index of the world frame (default: the lowest index present);
     ``weak_link_sigma_m``: a station whose position 1-sigma exceeds it is reported as weakly
-    linked. Each field's allowed range is declared next to it; a value outside it raises
-    :class:`~lhgraph.errors.InputError` naming the field.
+    linked; ``sweep_times``: ``"auto"`` puts the sweeps of a receiver that logs a station's
+    two sweeps together (the Crazyflie deck) at their sweep times
+    (:mod:`lhgraph.estimation.sweep_times`), ``"stamped"`` takes every stamp as the hit time;
+    ``board_step_quantile``: the board-step test of the stopping rule applies to this quantile
+    of the states' steps (1 = every state; None = 1, or ``FEW_DIODE_STEP_QUANTILE`` for
+    few-diode data, whose states seen by one station only can sit in a mirror pose that
+    turns for dozens of iterations without moving the stations); ``few_diode_sigma_rad``: the
+    floor of the angle noise on few-diode data instead of ``angle_sigma_rad`` (a real LH1
+    station's noise, SPEC §3; with ~7 hits per state, the state's pose and offset absorb
+    much of the residual, so their spread underestimates the noise). Each field's allowed range
+    is declared next to it; a value outside it raises :class:`~lhgraph.errors.InputError`
+    naming the field.
     """
 
     angle_sigma_rad: float = option(4e-5, gt=0)
@@ -56,6 +67,9 @@ class GraphOptions:
     board_step_tolerance_m: float = option(1e-4, ge=0)
     reference: int | None = option(None, kind=int, ge=0)
     weak_link_sigma_m: float = option(0.02, gt=0)
+    sweep_times: str = option("auto", choices=SWEEP_TIMES)
+    board_step_quantile: float | None = option(None, kind=float, gt=0, le=1)
+    few_diode_sigma_rad: float = option(6.5e-5, gt=0)
 
     def __post_init__(self) -> None:
         check_fields(self)

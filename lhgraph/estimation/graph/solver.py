@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,9 +28,11 @@ from lhgraph.estimation.graph.optimizer import (
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import STATION_POSE, initial_values
 from lhgraph.estimation.init import Initialiser
+from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
 from lhgraph.estimation.problem import GraphProblem, build_problem
 from lhgraph.estimation.result import Residuals, SolveResult
+from lhgraph.estimation.sweep_times import retime_co_logged
 from lhgraph.io.angles import Angles
 from lhgraph.io.stations import Station, Stations
 from lhgraph.io.trajectory import Trajectory
@@ -39,6 +42,10 @@ from lhgraph.model.lh1 import StationModel
 Array = NDArray[np.float64]
 Progress = Callable[[str], None]
 SOLVERS = ("lm", "isam2")
+FEW_DIODES = 5
+"""The default initialiser's PnP needs this many diodes with both angles per measurement."""
+FEW_DIODE_STEP_QUANTILE = 0.95
+"""The board-step quantile of the stopping rule on few-diode data (GraphOptions)."""
 
 
 def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | None = None,
@@ -48,7 +55,11 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
 
     ``angles`` as measured (rad, before factory correction), ``models`` the station models by
     index (factory calibration, rotor offsets). The world frame is the reference station's.
-    ``initialiser`` gives the initial values (default :class:`PnPKabschInitialiser`).
+    ``initialiser`` gives the initial values (default: :class:`PnPKabschInitialiser`, or
+    :class:`FewDiodeInitialiser` when the sweeps hold fewer than ``FEW_DIODES`` hits in the
+    median, too few for the default's per-measurement PnP). Sweeps of a receiver that logs a
+    station's two sweeps together are first put at their sweep times
+    (``options.sweep_times``, :func:`retime_co_logged`).
     """
     options = options or GraphOptions()
     models = models or {}
@@ -62,8 +73,23 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         raise SolverError(f"unknown solver '{options.solver}' (expected lm or isam2)")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    few = few_diode(angles)
+    if options.sweep_times == "auto":
+        retimed = retime_co_logged(angles)
+        if retimed is not None:
+            angles = retimed
+            if progress:
+                progress("sweeps logged together: put at their sweep times")
+    if few:
+        options = replace(options, angle_sigma_rad=max(options.angle_sigma_rad,
+                                                       options.few_diode_sigma_rad))
+    params = LMParams.from_options(options)
+    if options.board_step_quantile is None and few:
+        params = replace(params, board_step_quantile=FEW_DIODE_STEP_QUANTILE)
     problem = build_problem(board, angles, models, reference)
-    init = (initialiser or PnPKabschInitialiser())(board, angles, problem)
+    if initialiser is None:
+        initialiser = FewDiodeInitialiser() if few else PnPKabschInitialiser()
+    init = initialiser(board, angles, problem)
     timings["initialise"] = time.perf_counter() - t0
     if progress:
         progress(f"initialised {problem.n_states} board states, {len(problem.hits.angle)} hits")
@@ -74,8 +100,8 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         if options.solver == "lm":
             hook = (NoiseAdaptation(ev, options, progress) if NoiseAdaptation.enabled(options)
                     else None)
-            fit = levenberg_marquardt(graph, values, ev.cost, ev.layout,
-                                      LMParams.from_options(options), hook, progress)
+            fit = levenberg_marquardt(graph, values, ev.cost, ev.layout, params, hook,
+                                      progress)
         else:
             fit = isam2_batch(graph, values, ev.layout, options.max_iterations, progress)
         cov = {slot: fit.covariance(STATION_POSE.key(slot))
@@ -87,6 +113,11 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     timings["optimise"] = time.perf_counter() - t1
     ev.evaluate(fit.values)
     return _result(angles, problem, ev, fit, cov, options, timings, t0)
+
+
+def few_diode(angles: Angles) -> bool:
+    """Whether the median sweep of ``angles`` holds fewer than ``FEW_DIODES`` hits."""
+    return bool(np.median(np.bincount(angles.sweep_ids())) < FEW_DIODES)
 
 
 def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: OptimizerResult,

@@ -175,11 +175,12 @@ def facing_fraction(T_lh_board: Array, positions: Array, normals: Array,
     return np.sum(toward & seen, axis=1) / np.maximum(seen.sum(axis=1), 1)
 
 
-def _solve_candidates(
+def _twin_candidates(
     uv: Array, meas: Array, mask: NDArray[np.bool_], positions: Array, normals: Array,
     model: StationModel, iterations: int, huber_rad: float,
-) -> tuple[Array, Array, Array]:
-    """Homography pose and its planar mirror, both refined; the better one per measurement."""
+) -> tuple[Array, Array, Array, Array]:
+    """Homography pose and its planar mirror, each refined ``iterations`` times: poses and rms
+    of twin a, then of twin b."""
     c, B = _seen_planes(positions, normals, mask)
     plane_xy = np.einsum("msi,mij->msj", positions[None] - c[:, None], B[..., :2])
     T_cam_plane = _homography_poses(uv, mask, plane_xy)
@@ -200,16 +201,74 @@ def _solve_candidates(
     T1 = T0.copy()
     T1[:, :3, :3] = R_rot @ T0[:, :3, :3]
     T1[:, :3, 3] = c_lh - (T1[:, :3, :3] @ c[..., None])[..., 0]
+    Ta, rms_a, _ = _refine(T0, meas, mask, positions, model, iterations, huber_rad)
+    Tb, rms_b, _ = _refine(T1, meas, mask, positions, model, iterations, huber_rad)
+    return Ta, rms_a, Tb, rms_b
+
+
+def _solve_candidates(
+    uv: Array, meas: Array, mask: NDArray[np.bool_], positions: Array, normals: Array,
+    model: StationModel, iterations: int, huber_rad: float,
+) -> tuple[Array, Array, Array]:
+    """Homography pose and its planar mirror, both refined; the better one per measurement."""
     # both twins get a few iterations, only the better one the rest
     first = min(iterations, _CANDIDATE_ITERATIONS)
-    Ta, rms_a, _ = _refine(T0, meas, mask, positions, model, first, huber_rad)
-    Tb, rms_b, _ = _refine(T1, meas, mask, positions, model, first, huber_rad)
+    Ta, rms_a, Tb, rms_b = _twin_candidates(uv, meas, mask, positions, normals, model, first,
+                                            huber_rad)
     # a seen sensor must face the station: that rejects the wrong twin on curved boards
     face_a = facing_fraction(Ta, positions, normals, mask) > 0.8
     face_b = facing_fraction(Tb, positions, normals, mask) > 0.8
     better_b = np.where(face_a == face_b, (rms_b < rms_a) | ~np.isfinite(rms_a), face_b)
     T = np.where(better_b[:, None, None], Tb, Ta)
     return _refine(T, meas, mask, positions, model, iterations - first, huber_rad)
+
+
+@dataclass(frozen=True)
+class PlanarTwins:
+    """Both solutions of the planar mirror ambiguity per measurement: ``T_lh_board``
+    (M, 2, 4, 4), ``rms_rad`` (M, 2) (NaN: no pose), ``facing`` (M, 2) the fraction of seen
+    sensors facing the station, ``n_sensors`` (M,) sensors seen on both axes."""
+
+    T_lh_board: Array
+    rms_rad: Array
+    facing: Array
+    n_sensors: NDArray[np.int64]
+
+
+def planar_twins(azimuth: Array, elevation: Array, positions: Array, normals: Array,
+                 model: StationModel = IDEAL, iterations: int = 15, min_sensors: int = 4,
+                 huber_rad: float = 1e-3) -> PlanarTwins:
+    """Both mirror twins of every measurement's planar pose, each refined on the full model.
+
+    Angles ``(M, S)`` (rad, NaN = not seen) of sensors ``positions``/``normals`` (S, 3),
+    board frame. With few sensors (a 4-diode deck far away) the twins fit about equally
+    well, so the choice is left to the caller (:func:`~lhgraph.estimation.init.twins.
+    resolve_twins` picks the temporally consistent one). Measurements with fewer than
+    ``min_sensors`` sensors on both axes, or a twin behind the station, get NaN.
+    """
+    azimuth = np.asarray(azimuth, dtype=float)
+    elevation = np.asarray(elevation, dtype=float)
+    mask = np.isfinite(azimuth) & np.isfinite(elevation)
+    n = mask.sum(axis=1)
+    ok = n >= min_sensors
+    M = len(azimuth)
+    T_out = np.full((M, 2, 4, 4), np.nan)
+    rms_out = np.full((M, 2), np.nan)
+    facing = np.zeros((M, 2))
+    if np.any(ok):
+        az, el, mk = azimuth[ok], elevation[ok], mask[ok]
+        meas = np.stack([np.nan_to_num(az), np.nan_to_num(el)], axis=-1)
+        uv = np.stack([np.tan(az), np.tan(el)], axis=-1)
+        Ta, rms_a, Tb, rms_b = _twin_candidates(uv, meas, mk, positions, normals, model,
+                                                iterations, huber_rad)
+        T = np.stack([Ta, Tb], axis=1)
+        rms = np.stack([rms_a, rms_b], axis=1)
+        front = T[:, :, 0, 3] > 0
+        T_out[ok] = np.where(front[..., None, None], T, np.nan)
+        rms_out[ok] = np.where(front, rms, np.nan)
+        facing[ok] = np.stack([facing_fraction(Ta, positions, normals, mk),
+                               facing_fraction(Tb, positions, normals, mk)], axis=1)
+    return PlanarTwins(T_out, rms_out, facing, n)
 
 
 def board_poses(

@@ -103,6 +103,17 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
     weighted Kabsch on sensor points; twists from the merged path's change over
     ``velocity_span_s``."""
     paths = station_paths(board, angles, problem, pose_solver)
+    L0, overlap = join_paths(board, problem, paths, max_gap_s)
+    X0, V0 = world_states(paths, L0, problem.state_time, velocity_span_s)
+    return Initialisation(L0, X0, V0, overlap)
+
+
+def join_paths(board: Board, problem: GraphProblem, paths: list[tuple[Array, Array, Array]],
+               max_gap_s: float = 0.05) -> tuple[Array, list[int]]:
+    """Station poses ``T_world_lh`` (S, 4, 4) (slot 0 = identity) from every slot's path
+    ``(times, T_lh_board, rms_rad)``: a weighted Kabsch (weights 1/rms^2) between the sensor
+    points of each path and of the reference path interpolated to its times, over the pairs
+    whose proposal agrees with the median; and the time-matched pairs per slot."""
     t_ref, T_ref, _ = paths[0]
     if len(t_ref) < 2:
         raise SolverError(f"station {problem.station_ids[0]} (reference): too few usable "
@@ -129,8 +140,7 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
         dst = transform_points(T_ref_at[agree][:, None], board.positions[None])  # reference
         w = np.repeat(1.0 / (rms_s[ok][agree] ** 2 + 1e-10), len(board.positions))
         L0[slot] = weighted_kabsch(src.reshape(-1, 3), dst.reshape(-1, 3), w)
-    X0, V0 = world_states(paths, L0, problem.state_time, velocity_span_s)
-    return Initialisation(L0, X0, V0, overlap)
+    return L0, overlap
 
 
 def world_states(paths: list[tuple[Array, Array, Array]], T_world_lh: Array, t: Array,

@@ -1,0 +1,179 @@
+"""Initial values for receivers with few diodes (the Crazyflie Lighthouse deck: 4 coplanar
+diodes 30 x 15 mm apart), whose sweeps rarely hold every diode of both axes at once.
+
+Per station, every sweep becomes a measurement whose other axis is interpolated per diode
+in time from that diode's neighbouring sweeps (the paper's "full" reconstruction: a board
+moves little between sweeps 8-33 ms apart), so a diode missed by one sweep is filled in from
+the next. Each measurement with at least 4 diodes gives both planar twins
+(:func:`~lhgraph.estimation.init.pnp.planar_twins`); a two-state Viterbi over each station's
+sequence keeps the temporally consistent twin (:func:`~lhgraph.estimation.init.twins.
+resolve_twins`); the station paths are joined by the weighted Kabsch of the default
+initialiser (:func:`~lhgraph.estimation.init.pnp_kabsch.join_paths`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.estimation.init.pnp import planar_twins
+from lhgraph.estimation.init.pnp_kabsch import (
+    Initialisation,
+    consistent_path,
+    join_paths,
+    world_states,
+)
+from lhgraph.estimation.init.twins import resolve_twins
+from lhgraph.estimation.problem import GraphProblem
+from lhgraph.estimation.reconstruct import reconstruct_measurements
+from lhgraph.geometry.transforms import inverse, rotation_angle
+from lhgraph.io.angles import Angles
+from lhgraph.model.board import Board
+
+Array = NDArray[np.float64]
+
+MIN_SENSORS = 4
+"""A planar pose needs four points (a homography)."""
+
+
+@dataclass(frozen=True)
+class TwinPath:
+    """One station's measurements with both planar twins: ``time`` (M,) s, ``T_lh_board``
+    (M, 2, 4, 4), ``rms_rad`` (M, 2), ``emission`` (M, 2) each twin's own cost (chi-square
+    of its fit; inf: impossible)."""
+
+    time: Array
+    T_lh_board: Array
+    rms_rad: Array
+    emission: Array
+
+
+def twin_path(board: Board, angles: Angles, problem: GraphProblem, slot: int,
+              fit_sigma_rad: float = 1e-4) -> TwinPath:
+    """Station slot's interpolated measurements and both planar twins of each (at least
+    ``MIN_SENSORS`` diodes); emission = the twin's chi-square at ``fit_sigma_rad``, a twin
+    whose diodes face away is impossible."""
+    s = problem.station_ids[slot]
+    station = angles.select(angles.lighthouse == s)
+    if len(station) == 0:
+        return TwinPath(np.empty(0), np.empty((0, 2, 4, 4)), np.empty((0, 2)),
+                        np.empty((0, 2)))
+    meas = reconstruct_measurements(station, board, "full")
+    twins = planar_twins(meas.azimuth, meas.elevation, board.positions, board.normals,
+                         problem.models[slot], min_sensors=MIN_SENSORS)
+    chi2 = 2 * twins.n_sensors[:, None] * (twins.rms_rad / fit_sigma_rad) ** 2
+    emission = np.where((twins.facing > 0.5) & np.isfinite(chi2), chi2, np.inf)
+    valid = np.isfinite(emission).any(axis=1)
+    return TwinPath(meas.time[valid], twins.T_lh_board[valid], twins.rms_rad[valid],
+                    emission[valid])
+
+
+def chosen_path(twins: TwinPath, emission: Array, turn_sigma: float
+                ) -> tuple[Array, Array, Array]:
+    """The path ``(times, T_lh_board, rms_rad)`` of the Viterbi twins under ``emission``,
+    filtered like the default initialiser's paths (:func:`consistent_path`)."""
+    choice = resolve_twins(twins.time, twins.T_lh_board[..., :3, :3], emission, turn_sigma)
+    rows = np.flatnonzero(choice >= 0)
+    T = twins.T_lh_board[rows, choice[rows]]
+    rms = twins.rms_rad[rows, choice[rows]]
+    keep = consistent_path(twins.time[rows], T)
+    return twins.time[rows][keep], T[keep], rms[keep]
+
+
+def cross_station_cost(twins: list[TwinPath], T_world_lh: Array, slot: int,
+                       sigma_rad: float, max_gap_s: float) -> Array:
+    """(M, 2) cost of each twin of ``slot`` against the other stations: the squared angle
+    (in ``sigma_rad``) to the nearest twin, in the world, of the other stations' measurement
+    closest in time (within ``max_gap_s``; else 0). Mirror twins are mirrored about each
+    station's own line of sight, so only the true orientation is common to two stations."""
+    own = twins[slot]
+    R_own = T_world_lh[slot, :3, :3] @ own.T_lh_board[..., :3, :3]  # (M, 2, 3, 3)
+    best = np.full((len(own.time), 2), np.inf)
+    for other in range(len(twins)):
+        if other == slot or len(twins[other].time) == 0:
+            continue
+        o = twins[other]
+        i = np.clip(np.searchsorted(o.time, own.time), 1, max(len(o.time) - 1, 1))
+        i = np.where(np.abs(o.time[i - 1] - own.time) < np.abs(o.time[i] - own.time), i - 1, i)
+        near = np.abs(o.time[i] - own.time) < max_gap_s
+        R_o = T_world_lh[other, :3, :3] @ o.T_lh_board[i][..., :3, :3]  # (M, 2, 3, 3)
+        rel = np.swapaxes(R_own[:, :, None], -1, -2) @ R_o[:, None, :]  # (M, 2, 2, 3, 3)
+        angle = np.nanmin(np.where(np.isfinite(rel).all(axis=(-1, -2)),
+                                   rotation_angle(np.nan_to_num(rel)), np.inf), axis=2)
+        best = np.where(near[:, None], np.minimum(best, angle), best)
+    return np.where(np.isfinite(best), (best / sigma_rad) ** 2, 0.0)
+
+
+def triangulated(paths: list[tuple[Array, Array, Array]], T_world_lh: Array,
+                 max_gap_s: float) -> list[tuple[Array, Array, Array]]:
+    """The paths with each board position replaced by the point closest to its own ray and
+    the ray of another station toward its path interpolated to the same time (within
+    ``max_gap_s`` on both sides): the directions are precise, a 4-point pose's range is not
+    (~1 % at 3 m)."""
+    origin = T_world_lh[:, :3, 3]
+    world = [(t, T_world_lh[slot] @ T) for slot, (t, T, _) in enumerate(paths)]
+    out = []
+    for slot, (t, T, rms) in enumerate(paths):
+        p = world[slot][1][:, :3, 3].copy()
+        d0 = p - origin[slot]
+        d0 /= np.linalg.norm(d0, axis=1, keepdims=True)
+        for other, (t_o, T_o) in enumerate(world):
+            if other == slot or len(t_o) < 2:
+                continue
+            i = np.clip(np.searchsorted(t_o, t), 1, len(t_o) - 1)
+            ok = ((t > t_o[0]) & (t < t_o[-1]) & (t - t_o[i - 1] < max_gap_s)
+                  & (t_o[i] - t < max_gap_s))
+            w = ((t - t_o[i - 1]) / np.maximum(t_o[i] - t_o[i - 1], 1e-9))[:, None]
+            q = (1 - w) * T_o[i - 1, :3, 3] + w * T_o[i, :3, 3]
+            d1 = q - origin[other]
+            d1 /= np.linalg.norm(d1, axis=1, keepdims=True)
+            # closest points of the rays o0 + a d0 and o1 + b d1
+            b_ = np.sum(d0 * d1, axis=1)
+            r = origin[other] - origin[slot]
+            denom = np.maximum(1 - b_**2, 1e-9)
+            a = (r @ d0.T - b_ * (r @ d1.T)) / denom
+            c = (b_ * (r @ d0.T) - r @ d1.T) / denom
+            mid = 0.5 * (origin[slot] + a[:, None] * d0 + origin[other] + c[:, None] * d1)
+            ok &= (denom > 0.05) & (a > 0) & (c > 0)  # rays not near-parallel, both forward
+            p[ok] = mid[ok]
+        T_new = T.copy()
+        T_new[:, :3, 3] = (inverse(T_world_lh[slot]) @ np.c_[p, np.ones(len(p))].T).T[:, :3]
+        out.append((t, T_new, rms))
+    return out
+
+
+@dataclass(frozen=True)
+class FewDiodeInitialiser:
+    """The :class:`~lhgraph.estimation.init.Initialiser` for few-diode boards (see the module
+    docstring). ``turn_sigma`` (rad/sqrt(s)) is the Viterbi's random walk; ``cross_sigma_rad``
+    the spread of two stations' views of one orientation (the second pass); ``max_gap_s``
+    and ``velocity_span_s`` as in the default initialiser; the paths' rms is floored at
+    ``rms_floor_rad`` for the Kabsch weights (4 points leave only 2 redundant equations, so a
+    fit's own rms says little)."""
+
+    max_gap_s: float = 0.05
+    velocity_span_s: float = 0.01
+    turn_sigma: float = 0.3
+    cross_sigma_rad: float = 0.15
+    rms_floor_rad: float = 1e-4
+
+    def __call__(self, board: Board, angles: Angles, problem: GraphProblem) -> Initialisation:
+        S = len(problem.station_ids)
+        twins = [twin_path(board, angles, problem, slot) for slot in range(S)]
+        # pass 1: each station's twins by their own fit; stations joined on those paths
+        paths = [chosen_path(tw, tw.emission, self.turn_sigma) for tw in twins]
+        L0, overlap = join_paths(board, problem, self._floored(paths), self.max_gap_s)
+        # pass 2: the twins that agree with the other stations' views
+        paths = [chosen_path(tw, tw.emission + cross_station_cost(
+            twins, L0, slot, self.cross_sigma_rad, self.max_gap_s), self.turn_sigma)
+            for slot, tw in enumerate(twins)]
+        L0, overlap = join_paths(board, problem, self._floored(paths), self.max_gap_s)
+        paths = triangulated(paths, L0, self.max_gap_s)
+        X0, V0 = world_states(paths, L0, problem.state_time, self.velocity_span_s)
+        return Initialisation(L0, X0, V0, overlap)
+
+    def _floored(self, paths: list[tuple[Array, Array, Array]]
+                 ) -> list[tuple[Array, Array, Array]]:
+        return [(t, T, np.maximum(rms, self.rms_floor_rad)) for t, T, rms in paths]
