@@ -282,3 +282,25 @@ def test_estimate_board_poses_marks_thin_measurements_invalid(small_capture):
     assert not poses.valid[5] and np.isnan(poses.T_lh_board[5]).all()
     assert poses.valid.sum() >= len(meas) - 3
     assert len(poses.path().time) == poses.valid.sum()
+
+
+def test_board_pose_fits_identical_on_several_processes(small_capture):
+    """The cold fits are independent: a process pool gives bit-identical poses and costs,
+    and the progress still reaches every measurement."""
+    from lhgraph.estimation.baseline.board_poses import PARALLEL_MIN_FITS, fit_workers
+
+    cap = small_capture
+    meas = reconstruct_measurements(cap.angles.select(cap.angles.lighthouse == 0), cap.board)
+    assert len(meas) >= PARALLEL_MIN_FITS
+    assert fit_workers(2, PARALLEL_MIN_FITS - 1) == 1 and fit_workers(2, 100) == 2
+    assert fit_workers(1, 1000) == 1
+    seen: list[int] = []
+    one = estimate_board_poses(meas, cap.board, PaperOptions(n_jobs=1))
+    two = estimate_board_poses(meas, cap.board, PaperOptions(n_jobs=2),
+                               lambda stage, done, total: seen.append(done))
+    np.testing.assert_array_equal(one.T_lh_board, two.T_lh_board)
+    np.testing.assert_array_equal(one.cost, two.cost)
+    np.testing.assert_array_equal(one.evaluations, two.evaluations)
+    assert seen[0] == 0 and seen[-1] == len(meas) and seen == sorted(seen)
+    with pytest.raises(InputError, match="n_jobs"):
+        PaperOptions(n_jobs=-1)

@@ -5,6 +5,7 @@ of outlier fits (ours, :func:`reject_outlier_poses`)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -176,6 +177,50 @@ def typical_spacing(t: ArrayLike) -> float:
     return float(np.median(t[2:] - t[:-2])) / 2 if len(t) > 2 else np.inf
 
 
+PARALLEL_MIN_FITS = 24
+"""Cold fits below this count run in this process: a process pool's start (~1 s) would
+cost more than it saves (one fit takes ~0.1 s)."""
+PROGRESS_EVERY = 50
+
+
+def _fit_cold(tasks: list[tuple[Array, Array, Array, Array]], options: PaperOptions
+              ) -> list[tuple[Array, float, int]]:
+    """Cold-start fits of several measurements (``(azimuth, elevation, s, n)`` each)."""
+    return [estimate_board_pose(az, el, s, n, None, options) for az, el, s, n in tasks]
+
+
+def fit_workers(n_jobs: int, n_fits: int) -> int:
+    """Processes for ``n_fits`` independent fits: 1 below :data:`PARALLEL_MIN_FITS`, else
+    ``n_jobs`` (0 = every core) but never more than the fits."""
+    if n_fits < PARALLEL_MIN_FITS or n_jobs == 1:
+        return 1
+    from joblib import cpu_count
+
+    return max(1, min(cpu_count() if n_jobs == 0 else n_jobs, n_fits))
+
+
+def _cold_fits(tasks: list[tuple[Array, Array, Array, Array]], options: PaperOptions,
+               report: Callable[[int], None]) -> list[tuple[Array, float, int]]:
+    """Every cold fit, in order: in this process, or in ``options.n_jobs`` processes
+    (joblib) when there are enough (:func:`fit_workers`). The fits are independent, so the
+    results are the same either way; ``report(done)`` is called as chunks finish."""
+    workers = fit_workers(options.n_jobs, len(tasks))
+    size = PROGRESS_EVERY if workers == 1 else max(1, math.ceil(len(tasks) / (4 * workers)))
+    chunks = [tasks[i:i + size] for i in range(0, len(tasks), size)]
+    if workers == 1:
+        done = (_fit_cold(c, options) for c in chunks)
+    else:
+        from joblib import Parallel, delayed
+
+        done = Parallel(n_jobs=workers, return_as="generator")(
+            delayed(_fit_cold)(c, options) for c in chunks)
+    out: list[tuple[Array, float, int]] = []
+    for fits in done:
+        out += fits
+        report(len(out))
+    return out
+
+
 def estimate_board_poses(meas: Measurements, board: Board, options: PaperOptions | None = None,
                          progress: Progress | None = None) -> BoardPoses:
     """Board pose of every measurement of one station (station at the origin), paper step 2.
@@ -183,7 +228,8 @@ def estimate_board_poses(meas: Measurements, board: Board, options: PaperOptions
     ``meas`` must hold ideal angles over ``board``'s sensors (see :func:`to_ideal`).
     Measurements with fewer than ``options.min_sensors`` sensors having both angles are
     marked invalid. With ``options.warm_start`` each fit starts from the previous valid
-    pose when it is at most ``max_gap_periods`` measurement spacings old.
+    pose when it is at most ``max_gap_periods`` measurement spacings old (one after the
+    other); cold fits are independent and run on ``options.n_jobs`` processes.
     """
     options = options or PaperOptions()
     both = meas.both()
@@ -195,22 +241,30 @@ def estimate_board_poses(meas: Measurements, board: Board, options: PaperOptions
     valid = n_used >= options.min_sensors
     max_gap = options.max_gap_periods * typical_spacing(meas.time)
     stage = f"board poses, station {meas.lighthouse}"
+    say = (lambda done: None) if progress is None else (lambda done: progress(stage, done, M))
+    say(0)
+    if not options.warm_start:
+        ks = np.flatnonzero(valid)
+        tasks = [(meas.azimuth[k, both[k]], meas.elevation[k, both[k]],
+                  board.positions[both[k]], board.normals[both[k]]) for k in ks]
+        fits = _cold_fits(tasks, options, lambda done: say(int(ks[done - 1]) + 1))
+        for k, (T_k, cost_k, nfev_k) in zip(ks, fits, strict=True):
+            T[k], cost[k], nfev[k] = T_k, cost_k, nfev_k
     last = None
-    for k in range(M):
-        if progress is not None and k % 50 == 0:
-            progress(stage, k, M)
+    for k in range(M) if options.warm_start else ():
+        if k % PROGRESS_EVERY == 0:
+            say(k)
         if not valid[k]:
             continue
         u = both[k]
         warm = None
-        if options.warm_start and last is not None and meas.time[k] - meas.time[last] <= max_gap:
+        if last is not None and meas.time[k] - meas.time[last] <= max_gap:
             warm = T[last]
         T[k], cost[k], nfev[k] = estimate_board_pose(
             meas.azimuth[k, u], meas.elevation[k, u], board.positions[u], board.normals[u],
             warm, options)
         last = k
-    if progress is not None:
-        progress(stage, M, M)
+    say(M)
     return BoardPoses(meas.lighthouse, meas.time.copy(), T, cost, n_used, valid, nfev)
 
 

@@ -38,6 +38,9 @@ class PaperOptions:
       mean squared angle residual of a pose fit and ``eps = weight_floor * median(e_m + e_s)``.
     - ``pose_xatol`` (rad, m), ``pose_fatol`` (rad^2), ``pose_maxfev``: Nelder-Mead on K1.
     - ``refine``: run the final K2 refinement; ``refine_*``: its Nelder-Mead settings.
+    - ``n_jobs``: processes for the cold-start board-pose fits (0 = every core, 1 = this
+      process only); the fits are independent, the results the same for any value. Warm
+      starts run one after the other.
 
     Every field declares its allowed values; a bad one raises
     :class:`~lhgraph.errors.InputError` naming the field.
@@ -59,6 +62,7 @@ class PaperOptions:
     refine_xatol: float = option(1e-9, gt=0)
     refine_fatol: float = option(1e-15, gt=0)
     refine_maxfev: int = option(6000, gt=0)
+    n_jobs: int = option(0, ge=0)
 
     def __post_init__(self) -> None:
         check_fields(self)
