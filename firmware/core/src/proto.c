@@ -68,7 +68,34 @@ static void send_status(lhb_proto_t *p, uint8_t type, uint8_t seq, uint32_t now_
     lhb_put_le32(s + 28, ready ? c->image_crc : 0u);
     lhb_put_le32(s + 32, p->block_size);
     lhb_put_le32(s + 36, block_count(p));
+    /* health (docs/protocol.md): self-tests, fault record, run-time counters */
+    static const lhb_diag_t none = {0};
+    const lhb_diag_t *d = p->diag != NULL ? p->diag : &none;
+    const uint32_t health[] = {
+        d->selftest,     d->hse_khz,        d->fault_pc,          d->fault_lr,
+        d->fault_cfsr,   d->fault_hfsr,     d->dma_overruns,      d->isr_cycles_max,
+        d->isr_cycles_budget, p->frames_timed_out, d->tx_dropped, lhb_proto_blocks_unread(p),
+        d->reset_cause,
+    };
+    _Static_assert(LHB_STATUS_LEN_V1 + 4u * (sizeof health / sizeof health[0]) == LHB_STATUS_LEN,
+                   "STATUS layout");
+    for (size_t k = 0; k < sizeof health / sizeof health[0]; k++) {
+        lhb_put_le32(s + LHB_STATUS_LEN_V1 + 4u * k, health[k]);
+    }
     send(p, type, seq, s, sizeof s, NULL, 0);
+}
+
+uint32_t lhb_proto_blocks_unread(const lhb_proto_t *p)
+{
+    uint32_t count = block_count(p);
+    uint32_t tracked = count < LHB_READ_MAP_BITS ? count : LHB_READ_MAP_BITS;
+    return tracked - p->blocks_read;
+}
+
+static void forget_reads(lhb_proto_t *p)
+{
+    memset(p->read_map, 0, sizeof p->read_map);
+    p->blocks_read = 0;
 }
 
 static void handle_info(lhb_proto_t *p, uint8_t seq)
@@ -110,6 +137,10 @@ static void handle_read(lhb_proto_t *p, uint8_t seq, uint32_t index)
     }
     send(p, LHB_CMD_READ | LHB_RESP_FLAG, seq, p->payload, 4u + len, NULL, 0);
     p->blocks_sent++;
+    if (index < LHB_READ_MAP_BITS && (p->read_map[index >> 3] & (1u << (index & 7u))) == 0u) {
+        p->read_map[index >> 3] |= (uint8_t)(1u << (index & 7u));
+        p->blocks_read++;
+    }
 }
 
 /* Exact payload length each command takes. */
@@ -121,7 +152,7 @@ static int expected_len(uint8_t type)
     case LHB_CMD_ABORT:
         return 0;
     case LHB_CMD_ARM:
-        return (int)LHB_ARM_LEN;
+        return (int)LHB_ARM_LEN; /* or LHB_ARM_LEN_FLAGS: see lhb_proto_handle */
     case LHB_CMD_READ:
         return (int)LHB_READ_REQ_LEN;
     default:
@@ -150,7 +181,8 @@ void lhb_proto_handle(lhb_proto_t *p, const uint8_t *raw, size_t n, uint32_t now
         send_error(p, f.seq, f.type, LHB_E_UNKNOWN_CMD);
         return;
     }
-    if ((int)f.len != want) {
+    bool arm_flags = f.type == LHB_CMD_ARM && f.len == LHB_ARM_LEN_FLAGS;
+    if ((int)f.len != want && !arm_flags) {
         p->frames_bad++;
         send_error(p, f.seq, f.type, LHB_E_LENGTH);
         return;
@@ -169,17 +201,25 @@ void lhb_proto_handle(lhb_proto_t *p, const uint8_t *raw, size_t n, uint32_t now
         uint32_t duration = lhb_get_le32(f.payload);
         uint32_t delay = lhb_get_le32(f.payload + 4);
         uint64_t host_us = lhb_get_le64(f.payload + 8);
+        uint32_t flags = arm_flags ? lhb_get_le32(f.payload + 16) : 0u;
+        if (c->state == LHB_STATE_READY && lhb_proto_blocks_unread(p) != 0u &&
+            (flags & LHB_ARM_DISCARD) == 0u) {
+            send_error(p, f.seq, f.type, LHB_E_UNREAD); /* never drop a capture unasked */
+            break;
+        }
         r = lhb_capture_arm(c, duration, delay, host_us, now_ms);
         if (r != LHB_OK) {
             send_error(p, f.seq, f.type, -r);
             break;
         }
+        forget_reads(p);
         lhb_capture_poll(c, now_ms); /* a zero delay starts at once */
         send_status(p, LHB_CMD_ARM | LHB_RESP_FLAG, f.seq, now_ms);
         break;
     }
     case LHB_CMD_ABORT:
         lhb_capture_abort(c);
+        forget_reads(p);
         send_status(p, LHB_CMD_ABORT | LHB_RESP_FLAG, f.seq, now_ms);
         break;
     case LHB_CMD_READ:
@@ -193,6 +233,12 @@ void lhb_proto_handle(lhb_proto_t *p, const uint8_t *raw, size_t n, uint32_t now
 void lhb_proto_rx(lhb_proto_t *p, const uint8_t *data, size_t n, uint32_t now_ms)
 {
     for (size_t i = 0; i < n; i++) {
+        bool partial = p->dec.n != 0u || p->dec.code != 0u || p->dec.err != 0u;
+        if (partial && now_ms - p->last_rx_ms > LHB_FRAME_TIMEOUT_MS) {
+            lhb_cobs_dec_init(&p->dec, p->rx_raw, sizeof p->rx_raw); /* stale: drop it */
+            p->frames_timed_out++;
+        }
+        p->last_rx_ms = now_ms;
         long r = lhb_cobs_dec_push(&p->dec, data[i]);
         if (r > 0) {
             lhb_proto_handle(p, p->rx_raw, (size_t)(r - 1), now_ms);

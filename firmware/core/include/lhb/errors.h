@@ -13,6 +13,7 @@ typedef enum {
     LHB_E_ARG = 7,         /* argument out of range (duration, delay) */
     LHB_E_RANGE = 8,       /* READ block index past the end of the capture */
     LHB_E_HW = 9,          /* the sampling hardware refused to start */
+    LHB_E_UNREAD = 10,     /* ARM would drop a capture not yet downloaded (no discard flag) */
 } lhb_err_t;
 
 #endif
