@@ -16,12 +16,37 @@ from lhgraph.cli.common import COMMANDS
 from lhgraph.errors import LhgraphError
 
 
+class _Version(argparse.Action):
+    """``--version``: the installed package's version (read only when asked)."""
+
+    def __init__(self, option_strings: list[str], dest: str, **kwargs: object):
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS,
+                         help=str(kwargs.get("help")))
+
+    def __call__(self, parser: argparse.ArgumentParser, *_args: object) -> None:
+        print(f"lhgraph {version()}")
+        parser.exit()
+
+
+def version() -> str:
+    """The installed distribution's version, else :data:`lhgraph.__version__`."""
+    import importlib.metadata
+
+    import lhgraph
+
+    try:
+        return importlib.metadata.version("lhgraph")
+    except importlib.metadata.PackageNotFoundError:
+        return lhgraph.__version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``lhgraph`` argument parser with every registered command."""
     parser = argparse.ArgumentParser(
         prog="lhgraph",
         description="Calibrate Lighthouse v1 base-station poses from a photodiode-board capture.",
     )
+    parser.add_argument("--version", action=_Version, help="print the version and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for _name, add, run in COMMANDS:
         p = add(sub)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from lhgraph.cli.common import COMMANDS, add_common_output
+from lhgraph.cli.common import COMMANDS, add_common_output, add_verbose, progress_printer
 
 # --- simulate ---
 
@@ -68,7 +68,11 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--world", choices=WORLDS,
                    help="world frame: the reference station's (default) or gravity-aligned, "
                    "z up from the stations' OOTX accelerometer vectors")
+    p.add_argument("--resume", action="store_true",
+                   help="run directory: keep the methods that finished before with the same "
+                   "inputs and options, compute the rest")
     add_common_output(p)
+    add_verbose(p)
     return p
 
 
@@ -101,16 +105,20 @@ def run_solve(args: argparse.Namespace) -> int:
         config = replace(config, methods=None)
     if config.output is None:
         raise InputError("no output: give --output or set 'output' in the config")
-    progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
+    progress = progress_printer(args)
     if args.config and is_run_directory(config.output):
-        run = run_to_directory(config, config.output, args.force, progress)
+        shown = None if args.quiet else (lambda r: print_solution(r.result, r.errors,
+                                                                    flush=True))
+        run = run_to_directory(config, config.output, args.force, progress, args.resume,
+                               shown)
         if not args.quiet:
-            for r in run.runs:
-                print_solution(r.result, r.errors)
             if len(run.runs) > 1:
                 print(format_comparison(comparison_rows(run.runs)))
             print(f"wrote {len(run.files)} files to {run.directory}; report: {run.report}")
         return 0
+    if args.resume:
+        raise InputError("--resume is for a run directory output (a CONFIG and an output "
+                         "without .toml)", config.output)
     result, errors, written = solve_to_files(config, args.force, progress)
     if not args.quiet:
         print_solution(result, errors)

@@ -8,6 +8,7 @@ order of ``lhgraph --help``).
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Callable
 
 Runner = Callable[[argparse.Namespace], int]
@@ -20,3 +21,20 @@ def add_common_output(p: argparse.ArgumentParser) -> None:
     """``--force`` and ``--quiet``, the flags of every command that writes files."""
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def add_verbose(p: argparse.ArgumentParser) -> None:
+    """``--verbose``: the solver's own detail in the progress lines."""
+    p.add_argument("--verbose", action="store_true",
+                   help="progress with the solver's detail (errors, prior statistics)")
+
+
+def progress_printer(args: argparse.Namespace) -> Callable[[str], None] | None:
+    """Progress lines to stderr in a user's words (:class:`~lhgraph.report.progress.
+    PlainProgress`); None with ``--quiet``."""
+    if args.quiet:
+        return None
+    from lhgraph.report.progress import PlainProgress
+
+    return PlainProgress(lambda msg: print(f"  {msg}", file=sys.stderr),
+                         getattr(args, "verbose", False))

@@ -50,7 +50,9 @@ def add_view(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        description="Show a run directory's stations (with sweep frusta), board "
                        "path and diodes in an Open3D window, or --export the scene without a "
                        "display (docs/workflow.md).")
-    p.add_argument("run_dir", help="run directory (or one method's subdirectory)")
+    p.add_argument("run_dir", help="run directory: one method's, or a multi-method one "
+                   "(every method shown unless --method)")
+    p.add_argument("--method", help="of a multi-method run directory, show only this method")
     p.add_argument("--export", help="write FILE.png, .ply, .glb, .gltf or .obj instead")
     p.add_argument("--renderer", choices=RENDERERS, default="auto",
                    help="PNG renderer (default: Open3D offscreen, else matplotlib)")
@@ -61,7 +63,7 @@ def add_view(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run_view(args: argparse.Namespace) -> int:
     from lhgraph.report.viewer import build_scene, export, show
 
-    scene = build_scene(args.run_dir)
+    scene = build_scene(args.run_dir, method=args.method)
     if args.export:
         path, how = export(scene, args.export, args.force, args.renderer)
         if not args.quiet:

@@ -10,6 +10,12 @@ from lhgraph.estimation.metrics import PoseError
 from lhgraph.estimation.result import SolveResult
 from lhgraph.geometry.transforms import euler_zyx
 
+SIGMA_NOTE = (
+    "x, y, z: world frame (the reference station's unless gravity-aligned); roll, pitch, yaw: "
+    "R = Rz(yaw) Ry(pitch) Rx(roll)\n"
+    "sigma: length of the 1-sigma uncertainty, sqrt(sx^2 + sy^2 + sz^2), of the position (mm) "
+    "and the rotation (deg); per axis in summary.json and report.html")
+
 
 def format_solution(result: SolveResult, errors: list[PoseError] | None = None) -> str:
     """A plain-text table of the stations, residuals, timings and (optional) errors."""
@@ -33,9 +39,11 @@ def format_solution(result: SolveResult, errors: list[PoseError] | None = None) 
         ref = " (reference)" if k == result.stations.reference else ""
         lines.append(f"{k:>7} {p[0]:9.1f} {p[1]:9.1f} {p[2]:9.1f} {e[0]:8.3f} {e[1]:8.3f} "
                      f"{e[2]:8.3f} {sig}{ref}")
+    if any(s.covariance is not None for s in result.stations.stations.values()):
+        lines.append(SIGMA_NOTE)
     if result.residuals is not None:
         r = result.residuals
-        lines.append(f"residuals: {len(r.residual_rad)} hits, rms {r.rms_urad():.1f} urad "
+        lines.append(f"residuals: {len(r.residual_rad)} hits, rms {r.rms_urad():.1f} µrad "
                      f"(inliers), inlier fraction {r.inlier_fraction():.3f}")
     if result.timings_s:
         lines.append("time: " + ", ".join(f"{k} {v:.3f} s" for k, v in result.timings_s.items()))
@@ -52,14 +60,15 @@ def format_solution(result: SolveResult, errors: list[PoseError] | None = None) 
     return "\n".join(lines)
 
 
-def print_solution(result: SolveResult, errors: list[PoseError] | None = None) -> None:
-    """Print :func:`format_solution` to stdout."""
-    print(format_solution(result, errors))
+def print_solution(result: SolveResult, errors: list[PoseError] | None = None,
+                   flush: bool = False) -> None:
+    """Print :func:`format_solution` to stdout (``flush``: at once, e.g. before a long step)."""
+    print(format_solution(result, errors), flush=flush)
 
 
 def format_comparison(rows: list[dict[str, Any]]) -> str:
     """Plain-text table of the comparison rows (``lhgraph.workflow.rundir.comparison_rows``)."""
-    lines = [f"{'method':>7} {'station':>7} {'|p| mm':>9} {'angle deg':>9} {'rms urad':>9} "
+    lines = [f"{'method':>7} {'station':>7} {'|p| mm':>9} {'angle deg':>9} {'rms µrad':>9} "
              f"{'time s':>7}"]
 
     def num(v: float | None, fmt: str) -> str:

@@ -2,7 +2,8 @@
 
 :func:`build_scene` turns a run directory (``stations.toml``, ``trajectory.csv``; the board
 from the run's ``summary.json`` inputs) into plain numpy primitives in the world frame
-(reference station, m). :func:`show` opens them in an Open3D window; :func:`export` writes
+(reference station, m); a multi-method run directory gives every method's stations and
+paths. :func:`show` opens them in an Open3D window; :func:`export` writes
 a mesh (``.ply``, ``.glb``, ``.obj`` via Open3D, headless) or a PNG (Open3D's offscreen
 renderer when it works, else matplotlib). Open3D is imported only inside these functions
 (importing it takes seconds).
@@ -75,20 +76,45 @@ def _run_board(run_dir: Path) -> Board | None:
     return load_board(board["path"]) if board and Path(board["path"]).is_file() else None
 
 
-def build_scene(run_dir: str | Path, board: Board | None = None,
-                board_poses: int = BOARD_POSES) -> Scene:
-    """Scene of a run directory (a single-method one, or a method subdirectory): station
-    axes (x red, y green, z blue) and sweep frusta (grey), the board path (orange) and the
-    board's diodes at ``board_poses`` poses along it (blue)."""
+PATH_COLOURS = ((1.0, 0.5, 0.0), (0.6, 0.2, 0.7), (0.1, 0.6, 0.6), (0.5, 0.4, 0.1))
+
+
+def method_directories(run_dir: str | Path) -> list[Path]:
+    """The run directories a path holds: itself when it has ``stations.toml``, else each
+    method's subdirectory of a multi-method run (sorted); InputError when neither."""
     run_dir = Path(run_dir)
-    stations_file = run_dir / "stations.toml"
-    if not stations_file.is_file():
-        subdirs = sorted(p.name for p in run_dir.iterdir() if (p / "stations.toml").is_file()) \
-            if run_dir.is_dir() else []
-        hint = f" (methods here: {', '.join(subdirs)}; give one of them)" if subdirs else ""
-        raise InputError(f"no stations.toml: not a run directory{hint}", run_dir)
-    stations = load_stations(stations_file).relative_to_reference()
+    if (run_dir / "stations.toml").is_file():
+        return [run_dir]
+    subdirs = sorted(p for p in run_dir.iterdir() if (p / "stations.toml").is_file()) \
+        if run_dir.is_dir() else []
+    if not subdirs:
+        raise InputError("no stations.toml: not a run directory", run_dir)
+    return subdirs
+
+
+def build_scene(run_dir: str | Path, board: Board | None = None,
+                board_poses: int = BOARD_POSES, method: str | None = None) -> Scene:
+    """Scene of a run directory: station axes (x red, y green, z blue) and sweep frusta
+    (grey), the board path (orange; a multi-method run: one colour per method) and the
+    board's diodes at ``board_poses`` poses along it (blue). A multi-method run directory
+    shows every method, or only ``method``."""
+    folders = method_directories(run_dir)
+    if method is not None:
+        chosen = [f for f in folders if f.name == method]
+        if not chosen:
+            raise InputError(f"no method '{method}' here (methods: "
+                             f"{', '.join(f.name for f in folders)})", run_dir, "--method")
+        folders = chosen
     scene = Scene()
+    for folder, path_colour in zip(folders, PATH_COLOURS * len(folders), strict=False):
+        _add_run(scene, folder, board, board_poses, path_colour)
+    return scene
+
+
+def _add_run(scene: Scene, run_dir: Path, board: Board | None, board_poses: int,
+             path_colour: tuple[float, float, float]) -> None:
+    """One method's stations, frusta, board path and diodes into ``scene``."""
+    stations = load_stations(run_dir / "stations.toml").relative_to_reference()
     for k in stations.indices():
         T = stations.pose(k)
         for i, colour in enumerate(((1, 0, 0), (0, 0.7, 0), (0, 0, 1))):
@@ -98,13 +124,12 @@ def build_scene(run_dir: str | Path, board: Board | None = None,
     if traj_file.is_file():
         traj = load_trajectory(traj_file)
         p = traj.T_world_board[:, :3, 3]
-        scene.add_segments(np.stack([p[:-1], p[1:]], axis=1), (1.0, 0.5, 0.0))
+        scene.add_segments(np.stack([p[:-1], p[1:]], axis=1), path_colour)
         board = board or _run_board(run_dir)
         if board is not None and board_poses > 0:
             for i in np.linspace(0, len(traj.time) - 1, board_poses).round().astype(int):
                 scene.add_points(transform_points(traj.T_world_board[i], board.positions),
                                  (0.1, 0.3, 0.9))
-    return scene
 
 
 def to_open3d(scene: Scene, point_radius_m: float = 0.01, line_radius_m: float = 0.004):
@@ -137,11 +162,33 @@ def to_open3d(scene: Scene, point_radius_m: float = 0.01, line_radius_m: float =
     return mesh
 
 
+def display_problem() -> str | None:
+    """Why no window can open here (None when a display seems available): on Linux an X11
+    or Wayland display must be named by ``DISPLAY`` or ``WAYLAND_DISPLAY``."""
+    import os
+    import sys
+
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        return "no display (DISPLAY and WAYLAND_DISPLAY are unset)"
+    return None
+
+
 def show(scene: Scene) -> None:
-    """Open an interactive Open3D window (needs a display)."""
+    """Open an interactive Open3D window; InputError at once (instead of waiting for a
+    window that never comes) when there is no display or Open3D cannot open a window."""
+    hint = "the interactive view needs a display; without one use --export FILE.png"
+    problem = display_problem()
+    if problem is not None:
+        raise InputError(f"{problem}: {hint}")
     import open3d as o3d
 
-    o3d.visualization.draw_geometries([to_open3d(scene)], window_name="lhgraph view")
+    vis = o3d.visualization.Visualizer()
+    if not vis.create_window(window_name="lhgraph view"):
+        raise InputError(f"Open3D could not open a window: {hint}")
+    vis.add_geometry(to_open3d(scene))
+    vis.run()
+    vis.destroy_window()
 
 
 def _png_open3d(scene: Scene, path: Path, size: tuple[int, int]) -> bool:

@@ -28,10 +28,11 @@ import numpy as np
 from lhgraph.errors import InputError
 from lhgraph.estimation.metrics import PoseError, station_errors
 from lhgraph.estimation.result import Residuals, SolveResult
-from lhgraph.geometry.transforms import matrix_to_quat
+from lhgraph.geometry.transforms import euler_zyx, matrix_to_quat
 from lhgraph.io.files import check_writable, write_atomic, write_csv_columns
 from lhgraph.io.stations import Stations, load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
+from lhgraph.report.assessment import coverage, view_points
 from lhgraph.workflow.inputs import SolveInputs, check_inputs, load_inputs
 from lhgraph.workflow.solve import solve
 from lhgraph.workflow.solve_config import SolveConfig
@@ -102,7 +103,8 @@ def input_files(config: SolveConfig) -> dict[str, Path]:
 
 
 def residual_statistics(res: Residuals) -> dict[str, Any]:
-    """Counts, inlier rms and median |residual| (urad), overall and per station/axis."""
+    """Counts, inlier rms, median |residual| and robust spread 1.4826 MAD (µrad), overall
+    and per station/axis."""
 
     def stats(mask: np.ndarray) -> dict[str, Any]:
         r, w = res.residual_rad[mask], res.weight[mask]
@@ -111,6 +113,8 @@ def residual_statistics(res: Residuals) -> dict[str, Any]:
                 "inlier_fraction": float(np.mean(w > 0.5)) if len(w) else None,
                 "rms_urad": float(np.sqrt(np.mean(inl**2)) * 1e6) if len(inl) else None,
                 "median_abs_urad": float(np.median(np.abs(r)) * 1e6) if len(r) else None,
+                "robust_sigma_urad": (float(1.4826 * np.median(np.abs(r - np.median(r))) * 1e6)
+                                      if len(r) else None),
                 "max_abs_urad": float(np.max(np.abs(r)) * 1e6) if len(r) else None}
 
     out = stats(np.ones(len(res.residual_rad), dtype=bool))
@@ -122,15 +126,22 @@ def residual_statistics(res: Residuals) -> dict[str, Any]:
 
 
 def station_summary(stations: Stations) -> dict[str, Any]:
-    """Pose (m, quaternion wxyz) and 1-sigma (mm, deg) of every station."""
+    """Pose (m, quaternion wxyz, ZYX Euler roll/pitch/yaw deg) and 1-sigma of every station:
+    body-frame (mm, deg) and in the printed axes (world x, y, z mm; roll, pitch, yaw deg)."""
+    from lhgraph.report.uncertainty import pose_sigma
+
     out = {}
     for k in stations.indices():
         s = stations.stations[k]
         entry: dict[str, Any] = {"position_m": s.T_world_lh[:3, 3].tolist(),
-                                 "quaternion_wxyz": matrix_to_quat(s.T_world_lh[:3, :3]).tolist()}
+                                 "quaternion_wxyz": matrix_to_quat(s.T_world_lh[:3, :3]).tolist(),
+                                 "euler_deg": np.degrees(euler_zyx(s.T_world_lh[:3, :3])).tolist()}
         if s.covariance is not None:
             entry["sigma_position_mm"] = (np.sqrt(np.diag(s.covariance)[3:]) * 1e3).tolist()
             entry["sigma_rotation_deg"] = np.degrees(np.sqrt(np.diag(s.covariance)[:3])).tolist()
+            sigma = pose_sigma(s.T_world_lh, s.covariance)
+            entry["sigma_position_world_mm"] = (sigma.position_m * 1e3).tolist()
+            entry["sigma_euler_deg"] = np.degrees(sigma.euler_rad).tolist()
         out[str(k)] = entry
     return out
 
@@ -193,8 +204,55 @@ def summarise(config: SolveConfig, inputs: SolveInputs, result: SolveResult,
         "errors": error_summary(errors) if errors is not None else None,
         "timings_s": {"load": load_s, **result.timings_s},
         "warnings": result.warnings,
+        "diagnostics": result.diagnostics,
+        "coverage": {str(k): coverage(view_points(inputs.angles, k))
+                     for k in inputs.angles.stations()},
         "decode": inputs.notes,
+        "resume_key": resume_key(config, result.method, hashes),
     })
+
+
+def resume_key(config: SolveConfig, method: str, hashes: dict[str, dict[str, str]]) -> str:
+    """SHA-256 of what a method's result depends on: the input files' hashes (the config
+    file's excepted, so adding a method to it keeps the others), the method, its options,
+    the duration window and the world frame."""
+    import hashlib
+
+    data = {"inputs": {k: v["sha256"] for k, v in hashes.items() if k != "config"},
+            "method": method, "options": _json_safe(method_options(config, method)),
+            "duration_s": config.duration_s, "world": config.world}
+    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+
+
+def finished_run(folder: Path, method: str, key: str, truth: Stations | None
+                 ) -> MethodRun | None:
+    """The method's run kept in ``folder`` when it finished (its ``summary.json``, written
+    last, has ``key`` and every file it lists is there), else None."""
+    from lhgraph.io.files import read_csv_columns
+    from lhgraph.io.trajectory import load_trajectory
+
+    try:
+        summary = json.loads((folder / "summary.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if summary.get("resume_key") != key or summary.get("method") != method or not all(
+            (folder / name).is_file() for name in RUN_FILES):
+        return None
+    cols = read_csv_columns(folder / "residuals.csv", [
+        ("time", float), ("lighthouse", int), ("axis", int), ("sensor", int),
+        ("residual_rad", float), ("weight", float)])
+    residuals = Residuals(cols["time"], cols["lighthouse"], cols["axis"], cols["sensor"],
+                          cols["residual_rad"], cols["weight"])
+    timings = {k: v for k, v in summary["timings_s"].items() if k not in ("load", "report")}
+    result = SolveResult(method, load_stations(folder / "stations.toml"),
+                         load_trajectory(folder / "trajectory.csv"), residuals,
+                         summary["status"], summary["iterations"],
+                         summary["final_error"] if summary["final_error"] is not None
+                         else float("nan"), timings, summary["warnings"],
+                         summary.get("diagnostics") or {},
+                         error_history=summary["error_history"])
+    errors = station_errors(truth, result.stations) if truth is not None else None
+    return MethodRun(method, result, errors, summary, folder)
 
 
 def save_residuals(res: Residuals, path: str | Path, overwrite: bool = False) -> Path:
@@ -219,11 +277,15 @@ def _write_json(path: Path, data: dict[str, Any], overwrite: bool) -> Path:
 
 
 def run_to_directory(config: SolveConfig, output: str | Path, overwrite: bool = False,
-                     progress: Callable[[str], None] | None = None) -> RunDirectory:
+                     progress: Callable[[str], None] | None = None, resume: bool = False,
+                     on_run: Callable[[MethodRun], None] | None = None) -> RunDirectory:
     """Solve the config with each of its methods and write the run directory ``output``.
 
-    Refuses (InputError, nothing written) when any target file exists and not ``overwrite``,
-    or when ``output`` is an existing file.
+    Refuses (InputError, nothing written) when any target file exists and neither
+    ``overwrite`` nor ``resume``, or when ``output`` is an existing file. With ``resume`` a
+    method that finished before with the same inputs and options (:func:`finished_run`) is
+    kept, every other one is computed (its leftovers replaced) and the comparison rewritten.
+    ``on_run(run)`` is called as each method's run is ready (e.g. to print it at once).
     """
     from lhgraph.report.html import comparison_report, method_report  # matplotlib: slow
 
@@ -236,51 +298,73 @@ def run_to_directory(config: SolveConfig, output: str | Path, overwrite: bool = 
     methods = config.method_list()
     check_inputs(config)
     for target in planned_files(output, methods):
-        check_writable(target, overwrite)
+        if target.exists() and not target.is_dir() and not (overwrite or resume):
+            raise InputError("exists already (--resume keeps the methods that finished and "
+                             "computes the rest; --force recomputes everything)", target)
+        check_writable(target, True)
     say = progress or (lambda _msg: None)
-    tic = time.perf_counter()
-    inputs = load_inputs(config)
-    load_s = time.perf_counter() - tic
     hashes = {k: {"path": str(p), "sha256": sha256_of(p)}
               for k, p in input_files(config).items()}
     truth = load_stations(config.truth) if config.truth else None
+    folders = {m: output if len(methods) == 1 else output / m for m in methods}
+    kept = {m: run for m in methods if resume and (run := finished_run(
+        folders[m], m, resume_key(config, m, hashes), truth)) is not None}
+    tic = time.perf_counter()
+    inputs = load_inputs(config)
+    load_s = time.perf_counter() - tic
     say(f"loaded {len(inputs.angles)} hits of stations {inputs.angles.stations()} "
         f"in {load_s:.2f} s")
     runs: list[MethodRun] = []
     files: list[Path] = []
+    replace = overwrite or resume
     for method in methods:
-        say(f"[{method}] solving")
-        result = solve(inputs.board, inputs.angles, method, inputs.models, config.reference,
-                       config.graph, lambda msg, m=method: say(f"[{m}] {msg}"),
-                       world_up=inputs.world_up)
-        errors = station_errors(truth, result.stations) if truth is not None else None
-        summary = summarise(config, inputs, result, errors, hashes, load_s)
-        folder = output if len(methods) == 1 else output / method
-        files.append(save_stations(result.stations, folder / "stations.toml", overwrite))
-        if result.trajectory is not None:
-            files.append(save_trajectory(result.trajectory, folder / "trajectory.csv",
-                                         overwrite))
-        if result.residuals is not None:
-            files.append(save_residuals(result.residuals, folder / "residuals.csv", overwrite))
-        run = MethodRun(method, result, errors, summary, folder)
-        say(f"[{method}] writing the report")
-        tic = time.perf_counter()
-        html = method_report(method, result, summary, inputs.angles, truth)
-        summary["timings_s"]["report"] = time.perf_counter() - tic
-        files.append(_write_json(folder / "summary.json", summary, overwrite))
-        files.append(write_atomic(folder / "report.html", html.encode(), overwrite))
+        if method in kept:
+            say(f"[{method}] kept: finished before with the same inputs and options")
+            run = kept[method]
+        else:
+            run = _run_method(config, inputs, method, folders[method], truth, hashes, load_s,
+                              replace, say, files, method_report)
         runs.append(run)
+        if on_run is not None:
+            on_run(run)
     report = output / "report.html"
     if len(methods) > 1:
         rows = comparison_rows(runs)
         comparison = _json_safe({"methods": methods, "inputs": hashes, "seed": config.seed,
                                  "versions": versions(),
                                  "runs": {r.method: f"{r.method}/summary.json" for r in runs},
-                                 "comparison": rows})
-        files.append(_write_json(output / "summary.json", comparison, overwrite))
-        html = comparison_report({r.method: r.result for r in runs}, rows, truth)
-        files.append(write_atomic(report, html.encode(), overwrite))
+                                 "kept": sorted(kept), "comparison": rows})
+        html = comparison_report({r.method: r.result for r in runs}, rows, truth,
+                                 {r.method: r.summary for r in runs}, inputs.angles)
+        files.append(write_atomic(report, html.encode(), replace))
+        files.append(_write_json(output / "summary.json", comparison, replace))
     return RunDirectory(output, runs, report, files)
+
+
+def _run_method(config: SolveConfig, inputs: SolveInputs, method: str, folder: Path,
+                truth: Stations | None, hashes: dict[str, dict[str, str]], load_s: float,
+                overwrite: bool, say: Callable[[str], None], files: list[Path],
+                method_report: Callable[..., str]) -> MethodRun:
+    """Solve one method and write its files, ``summary.json`` last (the mark that it
+    finished); the paths written are appended to ``files``."""
+    say(f"[{method}] solving")
+    result = solve(inputs.board, inputs.angles, method, inputs.models, config.reference,
+                   config.graph, lambda msg: say(f"[{method}] {msg}"),
+                   world_up=inputs.world_up)
+    errors = station_errors(truth, result.stations) if truth is not None else None
+    summary = summarise(config, inputs, result, errors, hashes, load_s)
+    files.append(save_stations(result.stations, folder / "stations.toml", overwrite))
+    if result.trajectory is not None:
+        files.append(save_trajectory(result.trajectory, folder / "trajectory.csv", overwrite))
+    if result.residuals is not None:
+        files.append(save_residuals(result.residuals, folder / "residuals.csv", overwrite))
+    say(f"[{method}] writing the report")
+    tic = time.perf_counter()
+    html = method_report(method, result, summary, inputs.angles, truth)
+    summary["timings_s"]["report"] = time.perf_counter() - tic
+    files.append(write_atomic(folder / "report.html", html.encode(), overwrite))
+    files.append(_write_json(folder / "summary.json", summary, overwrite))
+    return MethodRun(method, result, errors, summary, folder)
 
 
 def solve_seconds(result: SolveResult) -> float:
