@@ -1,4 +1,6 @@
-/* Board main loop: link bytes -> protocol core; capture state machine steps. */
+/* Board main loop: link bytes -> protocol core; capture state machine steps; watchdog and
+ * status LED. Boot order: cycle counter (for the bounded waits), reset cause and fault
+ * record, clock (HSE checked), tick, LED, watchdog, SDRAM and its self-tests, link. */
 #include <stdint.h>
 
 #include "board.h"
@@ -6,6 +8,7 @@
 #include "lhb/config.h"
 #include "lhb/crc32.h"
 #include "lhb/proto.h"
+#include "lhb/txring.h"
 #include "regs.h"
 
 #define MAX_RECORDS (BOARD_SDRAM_SIZE / 8u)
@@ -23,8 +26,12 @@ static uint32_t board_id(void)
 
 int main(void)
 {
+    cycles_init();
+    health_boot();
     clock_init();
     systick_init();
+    led_init();
+    watchdog_start();
     bool sdram_ok = sdram_init();
     uart_init();
     sampler_init(&capture);
@@ -39,12 +46,13 @@ int main(void)
     lhb_hw_t hw = {sampler_start, sampler_stop, NULL};
     lhb_capture_init(&capture, &hw, sdram_ok ? record_store : 0, sdram_ok ? MAX_RECORDS : 0u, &t);
     lhb_proto_init(&proto, &capture, LHB_BLOCK_SIZE_DEFAULT, uart_tx, NULL);
+    proto.diag = &g_diag;
 
     for (;;) {
-        uint8_t b;
-        while (uart_rx_pop(&b)) {
-            lhb_proto_rx(&proto, &b, 1, millis());
-        }
-        lhb_capture_poll(&capture, millis());
+        uint32_t now = millis();
+        lhb_link_service(&proto, uart_tx_ring(), uart_rx_pop, now);
+        lhb_capture_poll(&capture, now);
+        led_update(now);
+        watchdog_refresh();
     }
 }

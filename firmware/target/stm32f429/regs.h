@@ -9,8 +9,10 @@
 
 typedef struct {
     REG CR, PLLCFGR, CFGR, CIR, AHB1RSTR, AHB2RSTR, AHB3RSTR, RES0, APB1RSTR, APB2RSTR, RES1[2],
-        AHB1ENR, AHB2ENR, AHB3ENR, RES2, APB1ENR, APB2ENR;
+        AHB1ENR, AHB2ENR, AHB3ENR, RES2, APB1ENR, APB2ENR, RES3[2], AHB1LPENR, AHB2LPENR,
+        AHB3LPENR, RES4, APB1LPENR, APB2LPENR, RES5[2], BDCR, CSR;
 } rcc_t;
+_Static_assert(__builtin_offsetof(rcc_t, CSR) == 0x74u, "RCC_CSR offset (RM0090 6.3.21)");
 #define RCC ((rcc_t *)0x40023800u)
 #define RCC_CR_HSEON (1u << 16)
 #define RCC_CR_HSERDY (1u << 17)
@@ -22,12 +24,16 @@ typedef struct {
 #define RCC_CFGR_SWS_PLL (2u << 2)
 #define RCC_CFGR_PPRE1_DIV4 (5u << 10)
 #define RCC_CFGR_PPRE2_DIV2 (4u << 13)
+#define RCC_CFGR_RTCPRE(n) ((uint32_t)(n) << 16)
+#define RCC_CSR_RMVF (1u << 24)
+#define RCC_CSR_IWDGRSTF (1u << 29)
 #define RCC_AHB1ENR_GPIO(n) (1u << (n)) /* A = 0 ... K = 10 */
 #define RCC_AHB1ENR_DMA2EN (1u << 22)
 #define RCC_AHB3ENR_FMCEN (1u << 0)
 #define RCC_APB1ENR_PWREN (1u << 28)
 #define RCC_APB2ENR_TIM8EN (1u << 1)
 #define RCC_APB2ENR_USART1EN (1u << 4)
+#define RCC_APB2ENR_TIM11EN (1u << 18)
 
 typedef struct {
     REG CR, CSR;
@@ -56,9 +62,13 @@ enum { PORT_A, PORT_B, PORT_C, PORT_D, PORT_E, PORT_F, PORT_G, PORT_H, PORT_I, P
 
 typedef struct {
     REG CR1, CR2, SMCR, DIER, SR, EGR, CCMR1, CCMR2, CCER, CNT, PSC, ARR, RCR, CCR1, CCR2, CCR3,
-        CCR4, BDTR, DCR, DMAR;
+        CCR4, BDTR, DCR, DMAR, OR;
 } tim_t;
 #define TIM8 ((tim_t *)0x40010400u)
+#define TIM11 ((tim_t *)0x40014800u)
+#define TIM_SR_CC1IF (1u << 1)
+#define TIM11_OR_TI1_HSE_RTC (2u << 0) /* TI1_RMP = 10: HSE_RTC (RM0090 18.5.11) */
+_Static_assert(__builtin_offsetof(tim_t, OR) == 0x50u, "TIMx_OR offset");
 #define TIM_CR1_CEN (1u << 0)
 #define TIM_CR1_URS (1u << 2)
 #define TIM_DIER_UDE (1u << 8)
@@ -119,6 +129,11 @@ typedef struct {
 #define FMC_SDSR_BUSY (1u << 5)
 
 typedef struct {
+    REG KR, PR, RLR, SR;
+} iwdg_t;
+#define IWDG ((iwdg_t *)0x40003000u)
+
+typedef struct {
     REG CTRL, LOAD, VAL, CALIB;
 } systick_t;
 #define SYSTICK ((systick_t *)0xE000E010u)
@@ -127,6 +142,16 @@ typedef struct {
 #define NVIC_ICER ((REG *)0xE000E180u)
 #define NVIC_IPR ((volatile uint8_t *)0xE000E400u)
 #define SCB_CPACR (*(REG *)0xE000ED88u)
+#define SCB_AIRCR (*(REG *)0xE000ED0Cu)
+#define SCB_AIRCR_RESET ((0x05FAu << 16) | (1u << 2)) /* VECTKEY | SYSRESETREQ */
+#define SCB_CFSR (*(REG *)0xE000ED28u)
+#define SCB_HFSR (*(REG *)0xE000ED2Cu)
+#define DEMCR (*(REG *)0xE000EDFCu)
+#define DEMCR_TRCENA (1u << 24)
+#define DWT_CTRL (*(REG *)0xE0001000u)
+#define DWT_CYCCNT (*(REG *)0xE0001004u)
+#define DBGMCU_APB1_FZ (*(REG *)0xE0042008u)
+#define DBGMCU_IWDG_STOP (1u << 12)
 #define UID_BASE ((const volatile uint32_t *)0x1FFF7A10u)
 
 /* IRQ numbers used here (RM0090 vector table) */

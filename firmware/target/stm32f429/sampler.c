@@ -5,12 +5,17 @@
  * (channels 16..31), as half-words, into two pairs of SRAM buffers (double-buffer mode:
  * the DMA fills one half while the CPU reads the other). Stream 2 finishes a half last, so
  * its transfer-complete interrupt hands the finished half to the core, which turns it into
- * edge records in SDRAM. If the CPU is a whole half late, or the DMA reports an error, the
- * capture stops and is marked as overflowed. */
+ * edge records in SDRAM. The half to read follows from the count of halves processed
+ * (core dma_halves.c), with the CT bit as a check on entry and the TC flag and CT again
+ * after the copy: an interrupt a whole half late, or overtaken by the DMA while copying,
+ * is counted in g_diag.dma_overruns (STATUS) and stops the capture marked as overflowed;
+ * so does a DMA error. The interrupt's cost is measured with the cycle counter
+ * (g_diag.isr_cycles_max) against the budget of one half (2048 samples = 184 320 cycles). */
 #include <stdint.h>
 
 #include "board.h"
 #include "hw.h"
+#include "lhb/dma_halves.h"
 #include "regs.h"
 
 #define CHUNK 2048u /* samples per half = 1.024 ms */
@@ -22,6 +27,7 @@ static uint16_t buf_lo[2][CHUNK] __attribute__((aligned(4)));
 static uint16_t buf_hi[2][CHUNK] __attribute__((aligned(4)));
 static uint32_t words[CHUNK] __attribute__((section(".ccm")));
 static lhb_capture_t *g_cap;
+static lhb_halves_t g_halves;
 
 #define S_LO 1 /* DMA2 stream 1, channel 7: TIM8_UP */
 #define S_HI 2 /* DMA2 stream 2, channel 7: TIM8_CH1 */
@@ -37,12 +43,15 @@ void sampler_init(lhb_capture_t *cap)
     GPIO(PORT_I)->PUPDR = 0;
     GPIO(PORT_J)->MODER = 0;
     GPIO(PORT_J)->PUPDR = 0;
+    g_diag.isr_cycles_budget = CHUNK * (BOARD_SYSCLK_HZ / 2000000u);
 }
 
 static void stream_off(int s)
 {
     DMA2->S[s].CR &= ~DMA_CR_EN;
-    while ((DMA2->S[s].CR & DMA_CR_EN) != 0u) {
+    /* EN clears once the current transfer is over (one half-word, well under 1 us) */
+    if (!wait_reg(&DMA2->S[s].CR, DMA_CR_EN, 0u, BOARD_SYSCLK_HZ / 10000u)) {
+        g_diag.selftest |= LHB_ST_PERIPH_TIMEOUT;
     }
     DMA2->LIFCR = DMA_FLAGS_ALL << DMA_LISR_SHIFT(s);
 }
@@ -66,6 +75,7 @@ int sampler_start(void *ctx, uint32_t n_samples)
         return -1; /* SDRAM failed its test at boot */
     }
     sampler_stop(NULL);
+    lhb_halves_init(&g_halves);
     TIM8->CR1 = TIM_CR1_URS;
     TIM8->PSC = 0;
     TIM8->ARR = TIM8_ARR;
@@ -103,8 +113,12 @@ static void overrun(void)
     g_cap->done = 1u;
 }
 
-void DMA2_Stream2_IRQHandler(void);
-void DMA2_Stream2_IRQHandler(void)
+static uint32_t ct_hi(void)
+{
+    return (DMA2->S[S_HI].CR & DMA_CR_CT) != 0u ? 1u : 0u;
+}
+
+static void isr_body(void)
 {
     uint32_t isr = DMA2->LISR;
     uint32_t hi_flags = (isr >> DMA_LISR_SHIFT(S_HI)) & DMA_FLAGS_ALL;
@@ -117,20 +131,37 @@ void DMA2_Stream2_IRQHandler(void)
     if ((hi_flags & DMA_FLAG_TC) == 0u) {
         return;
     }
-    /* CT names the half the DMA is filling now: the other one is complete */
-    uint32_t half = (DMA2->S[S_HI].CR & DMA_CR_CT) != 0u ? 0u : 1u;
+    int half = lhb_halves_begin(&g_halves, ct_hi());
+    if (half < 0) {
+        g_diag.dma_overruns++;
+        overrun();
+        return;
+    }
     const uint16_t *lo = buf_lo[half];
     const uint16_t *hi = buf_hi[half];
     for (uint32_t i = 0; i < CHUNK; i++) {
         words[i] = ((uint32_t)lo[i] | ((uint32_t)hi[i] << 16)) ^ BOARD_INPUT_INVERT;
     }
-    bool finished = lhb_capture_feed(g_cap, words, CHUNK);
-    /* a new transfer-complete meanwhile means the DMA is overwriting what we just read */
-    if (!finished && ((DMA2->LISR >> DMA_LISR_SHIFT(S_HI)) & DMA_FLAG_TC) != 0u) {
+    /* a new transfer-complete (or CT back on this half) means the DMA overtook the copy */
+    bool again = ((DMA2->LISR >> DMA_LISR_SHIFT(S_HI)) & DMA_FLAG_TC) != 0u ||
+                 ct_hi() == (uint32_t)half;
+    if (!lhb_halves_end(&g_halves, again)) {
+        g_diag.dma_overruns++;
         overrun();
         return;
     }
-    if (finished) {
+    if (lhb_capture_feed(g_cap, words, CHUNK)) {
         TIM8->CR1 &= ~TIM_CR1_CEN; /* the main loop calls sampler_stop via the core */
+    }
+}
+
+void DMA2_Stream2_IRQHandler(void);
+void DMA2_Stream2_IRQHandler(void)
+{
+    uint32_t t0 = cycles_now();
+    isr_body();
+    uint32_t spent = cycles_now() - t0;
+    if (spent > g_diag.isr_cycles_max) {
+        g_diag.isr_cycles_max = spent;
     }
 }

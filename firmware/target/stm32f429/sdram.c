@@ -1,7 +1,32 @@
-/* FMC set-up for the IS42S16320F (64 MB, 16-bit) on SDRAM bank 1, SDCLK = 90 MHz. */
+/* FMC set-up for the IS42S16320F (64 MB, 16-bit) on SDRAM bank 1, SDCLK = 90 MHz, and the
+ * SDRAM self-tests run at boot.
+ *
+ * Read path (FMC_SDCR1, RM0090 37.7.3): CAS latency 3, RBURST off, RPIPE = 1 HCLK: ST's
+ * reference settings for the F429 at this SDCLK.
+ * Timings (FMC_SDTR1, RM0090 37.7.4), in SDCLK cycles of 11.1 ns. The nanosecond figures
+ * are the -7 speed-grade minima this firmware has assumed; they were not re-read from the
+ * IS42S16320F datasheet (not at hand): check them against its AC table for the fitted grade
+ * before bring-up (firmware/README.md, "Unverified on hardware"). tMRD 2 CLK; tXSR 70 ns -> 7;
+ * tRAS 42 ns -> 4; tRC 60 ns -> 6 minimum, 7 used (ST's reference value, 77.8 ns);
+ * tWR 2 CLK minimum, 3 used because RM0090 requires TWR >= TRC - TRCD - TRP (7 - 2 - 2);
+ * tRP 15 ns -> 2; tRCD 15 ns -> 2.
+ * Refresh (FMC_SDRTR, RM0090 37.7.6): 8192 rows every 64 ms -> 7.8125 us per row =
+ * 703 SDCLK at 90 MHz; COUNT = 703 - 20 (the margin RM0090 asks for) = 683.
+ *
+ * Self-tests (core memtest.c): data-bus walking ones/zeros, address-bus walking ones over
+ * all 24 word-address lines, March C- over the first 1 MiB (512 rows of bank 0), and a
+ * retention test: one word in every row of every bank (stride 2 KiB = one row) written,
+ * left 100 ms (> the 64 ms refresh period) with the FMC refreshing, read back. */
 #include "board.h"
 #include "hw.h"
+#include "lhb/memtest.h"
 #include "regs.h"
+
+#define SDRAM_WORDS (BOARD_SDRAM_SIZE / 4u)
+#define MARCH_WORDS (1024u * 1024u / 4u)
+#define ROW_WORDS (2048u / 4u) /* 1024 columns x 16 bit */
+#define RETENTION_MS 100u
+#define FMC_TIMEOUT_CYCLES (BOARD_SYSCLK_HZ / 1000u) /* 1 ms; commands take < 1 us */
 
 typedef struct {
     uint8_t port;
@@ -34,19 +59,47 @@ static void pin_af(const pin_t *p, uint32_t af)
     g->AFR[n >> 3] = (g->AFR[n >> 3] & ~(0xFu << (4u * (n & 7u)))) | (af << (4u * (n & 7u)));
 }
 
-static void delay_cycles(uint32_t n)
+static bool sdram_cmd(uint32_t mode, uint32_t auto_refresh, uint32_t mrd)
 {
-    for (volatile uint32_t i = 0; i < n; i++) {
-    }
-}
-
-static void sdram_cmd(uint32_t mode, uint32_t auto_refresh, uint32_t mrd)
-{
-    while ((FMC_SDRAM->SDSR & FMC_SDSR_BUSY) != 0u) {
+    if (!wait_reg(&FMC_SDRAM->SDSR, FMC_SDSR_BUSY, 0u, FMC_TIMEOUT_CYCLES)) {
+        return false;
     }
     /* CTB1 (bit 4): command for bank 1 */
     FMC_SDRAM->SDCMR = mode | (1u << 4) | ((auto_refresh - 1u) << 5) | (mrd << 9);
-    while ((FMC_SDRAM->SDSR & FMC_SDSR_BUSY) != 0u) {
+    return wait_reg(&FMC_SDRAM->SDSR, FMC_SDSR_BUSY, 0u, FMC_TIMEOUT_CYCLES);
+}
+
+static uint32_t mem_rd(void *ctx, uint32_t word)
+{
+    (void)ctx;
+    return ((volatile uint32_t *)BOARD_SDRAM_BASE)[word];
+}
+
+static void mem_wr(void *ctx, uint32_t word, uint32_t value)
+{
+    (void)ctx;
+    ((volatile uint32_t *)BOARD_SDRAM_BASE)[word] = value;
+}
+
+static void self_test(void)
+{
+    const lhb_mem_t m = {mem_rd, mem_wr, NULL};
+    if (lhb_mem_data_bus(&m, 0u) >= 0 || lhb_mem_address_bus(&m, SDRAM_WORDS) >= 0) {
+        g_diag.selftest |= LHB_ST_SDRAM_BUS;
+        return; /* the other tests cannot mean anything */
+    }
+    watchdog_refresh();
+    if (lhb_mem_march_c_minus(&m, 0u, MARCH_WORDS, 0x00000000u) >= 0) {
+        g_diag.selftest |= LHB_ST_SDRAM_MARCH;
+    }
+    watchdog_refresh();
+    lhb_mem_retention_write(&m, SDRAM_WORDS, ROW_WORDS, 0x5EED1234u);
+    uint32_t t0 = millis();
+    while (millis() - t0 <= RETENTION_MS) {
+        watchdog_refresh(); /* the FMC keeps refreshing meanwhile */
+    }
+    if (lhb_mem_retention_check(&m, SDRAM_WORDS, ROW_WORDS, 0x5EED1234u) >= 0) {
+        g_diag.selftest |= LHB_ST_SDRAM_RETENTION;
     }
 }
 
@@ -59,32 +112,25 @@ bool sdram_init(void)
     for (unsigned i = 0; i < sizeof fmc_pins / sizeof fmc_pins[0]; i++) {
         pin_af(&fmc_pins[i], 12u);
     }
-    /* SDCR1: 10 column bits (NC=2), 13 row bits (NR=2), 16-bit (MWID=1), 4 banks (NB=1),
-     * CAS 3, SDCLK = HCLK/2 (SDCLK=2), read burst on, no read pipe delay */
-    FMC_SDRAM->SDCR[0] = 2u | (2u << 2) | (1u << 4) | (1u << 6) | (3u << 7) | (2u << 10) | (1u << 12);
-    /* SDTR1 at 11.1 ns per clock (values minus one): tMRD 2, tXSR 70 ns -> 7, tRAS 42 ns -> 4,
-     * tRC 60 ns -> 6, tWR 2, tRP 15 ns -> 2, tRCD 15 ns -> 2 */
-    FMC_SDRAM->SDTR[0] = (2u - 1u) | ((7u - 1u) << 4) | ((4u - 1u) << 8) | ((6u - 1u) << 12) |
-                         ((2u - 1u) << 16) | ((2u - 1u) << 20) | ((2u - 1u) << 24);
-    sdram_cmd(1u, 1u, 0u);       /* clock configuration enable */
-    delay_cycles(180000u / 4u);  /* >= 100 us power-up delay */
-    sdram_cmd(2u, 1u, 0u);       /* precharge all */
-    sdram_cmd(3u, 8u, 0u);       /* 8 auto-refresh cycles */
+    /* SDCR1: 10 column bits (NC=2), 13 row bits (NR=2), 16-bit (MWID=1),
+     * 4 banks (NB=1), CAS 3, SDCLK = HCLK/2 (SDCLK=2), RBURST 0, RPIPE 1 */
+    FMC_SDRAM->SDCR[0] = 2u | (2u << 2) | (1u << 4) | (1u << 6) | (3u << 7) | (2u << 10) |
+                         (0u << 12) | (1u << 13);
+    /* SDTR1 (values minus one): TMRD 2, TXSR 7, TRAS 4, TRC 7, TWR 3, TRP 2, TRCD 2 */
+    FMC_SDRAM->SDTR[0] = (2u - 1u) | ((7u - 1u) << 4) | ((4u - 1u) << 8) | ((7u - 1u) << 12) |
+                         ((3u - 1u) << 16) | ((2u - 1u) << 20) | ((2u - 1u) << 24);
+    bool ok = sdram_cmd(1u, 1u, 0u);                /* clock configuration enable */
+    delay_cycles(BOARD_SYSCLK_HZ / 10000u);         /* >= 100 us power-up delay */
+    ok = ok && sdram_cmd(2u, 1u, 0u);               /* precharge all */
+    ok = ok && sdram_cmd(3u, 8u, 0u);               /* 8 auto-refresh cycles */
     /* mode register: burst length 1, sequential, CAS 3, single-location write burst */
-    sdram_cmd(4u, 1u, 0x0230u);
-    /* refresh: 64 ms / 8192 rows = 7.81 us -> 703 SDCLK, minus 20 margin */
-    FMC_SDRAM->SDRTR = (683u << 1);
-
-    /* pattern test across the whole range (a few words per MB) */
-    volatile uint32_t *m = (volatile uint32_t *)BOARD_SDRAM_BASE;
-    const uint32_t words = BOARD_SDRAM_SIZE / 4u;
-    for (uint32_t i = 0; i < words; i += 65537u) {
-        m[i] = i * 2654435761u;
+    ok = ok && sdram_cmd(4u, 1u, 0x0230u);
+    if (!ok) {
+        g_diag.selftest |= LHB_ST_SDRAM_TIMEOUT;
+        return false;
     }
-    for (uint32_t i = 0; i < words; i += 65537u) {
-        if (m[i] != i * 2654435761u) {
-            return false;
-        }
-    }
-    return true;
+    FMC_SDRAM->SDRTR = 683u << 1; /* refresh count, see the top of this file */
+    self_test();
+    return (g_diag.selftest & (LHB_ST_SDRAM_BUS | LHB_ST_SDRAM_MARCH | LHB_ST_SDRAM_RETENTION)) ==
+           0u;
 }

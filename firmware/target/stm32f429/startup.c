@@ -1,4 +1,6 @@
-/* Reset handler and vector table for the STM32F429 (16 system + 91 device vectors). */
+/* Reset handler and vector table for the STM32F429 (16 system + 91 device vectors). Every
+ * vector without a driver (NMI, HardFault, MemManage, BusFault, UsageFault, unexpected
+ * interrupts) goes to health.c's fault_entry. */
 #include <stdint.h>
 
 #include "regs.h"
@@ -7,17 +9,10 @@ extern uint32_t _sidata, _sdata, _edata, _sbss, _ebss, _estack;
 int main(void);
 
 void Reset_Handler(void);
-void Default_Handler(void);
 void SysTick_Handler(void);
 void USART1_IRQHandler(void);
 void DMA2_Stream2_IRQHandler(void);
-
-void Default_Handler(void)
-{
-    for (;;) {
-        /* unexpected interrupt or fault: stay here for the debugger (the watchdog is off) */
-    }
-}
+void fault_entry(void); /* health.c: records the fault for the next boot, then resets */
 
 void Reset_Handler(void)
 {
@@ -46,7 +41,7 @@ typedef void (*vector_t)(void);
 __attribute__((section(".isr_vector"), used)) const vector_t vector_table[N_VECTORS] = {
     [0] = (vector_t)(uintptr_t)&_estack,
     [1] = Reset_Handler,
-    [2 ... N_VECTORS - 1] = Default_Handler,
+    [2 ... N_VECTORS - 1] = fault_entry, /* NMI, faults, unexpected interrupts */
     [7] = 0, [8] = 0, [9] = 0, [10] = 0, [13] = 0, /* reserved */
     [15] = SysTick_Handler,
     [16 + IRQ_USART1] = USART1_IRQHandler,

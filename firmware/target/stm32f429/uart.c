@@ -1,7 +1,11 @@
 /* USART1 at 6 Mbaud with RTS/CTS, interrupt-driven both ways: received bytes go into a ring
- * buffer that the main loop drains; bytes to send go into a second ring that the TXE
- * interrupt empties, so the main loop prepares the next READ answer (CRC, COBS) while the
- * previous one is on the wire. 6 Mbaud is exact: 90 MHz / (8 * 1.875), BRR = 1 << 4 | 7. */
+ * buffer that the main loop drains; answers go whole into a send ring (core txring.c) that
+ * the TXE interrupt empties, so the main loop prepares the next READ answer (CRC, COBS)
+ * while the previous one is on the wire. Sending never waits: the main loop hands requests
+ * to the protocol only while the ring has room for the largest answer (lhb_link_service),
+ * so a host that never asserts CTS stalls the link, not the board; an answer that still
+ * does not fit is dropped whole and counted (STATUS tx_dropped).
+ * 6 Mbaud is exact: 90 MHz / (8 * 1.875), BRR = 1 << 4 | 7. */
 #include "board.h"
 #include "hw.h"
 #include "regs.h"
@@ -13,8 +17,7 @@ static volatile uint8_t rx_buf[RX_SIZE];
 static volatile uint32_t rx_head; /* written by the interrupt */
 static volatile uint32_t rx_tail; /* written by the main loop */
 static volatile uint8_t tx_buf[TX_SIZE];
-static volatile uint32_t tx_head; /* written by the main loop */
-static volatile uint32_t tx_tail; /* written by the interrupt */
+static lhb_txring_t tx_ring;
 
 static void pin_af7(uint32_t n)
 {
@@ -35,6 +38,7 @@ void uart_init(void)
     pin_af7(11); /* CTS */
     pin_af7(12); /* RTS */
     USART1->CR1 = 0;
+    lhb_txring_init(&tx_ring, tx_buf, TX_SIZE, &g_diag.tx_dropped);
     /* OVER8: USARTDIV = 90e6 / (8 * 6e6) = 1.875 -> mantissa 1, fraction 0.875 * 8 = 7 */
     _Static_assert(BOARD_PCLK2_HZ == 90000000u && BOARD_UART_BAUD == 6000000u,
                    "BRR below is for 90 MHz / 6 Mbaud");
@@ -58,12 +62,11 @@ void USART1_IRQHandler(void)
         }
     }
     if ((sr & USART_SR_TXE) != 0u && (USART1->CR1 & USART_CR1_TXEIE) != 0u) {
-        uint32_t t = tx_tail;
-        if (t == tx_head) {
-            USART1->CR1 &= ~USART_CR1_TXEIE; /* nothing left to send */
+        uint8_t b;
+        if (lhb_txring_pop(&tx_ring, &b)) {
+            USART1->DR = b;
         } else {
-            USART1->DR = tx_buf[t];
-            tx_tail = (t + 1u) & (TX_SIZE - 1u);
+            USART1->CR1 &= ~USART_CR1_TXEIE; /* nothing left to send */
         }
     }
 }
@@ -82,19 +85,13 @@ bool uart_rx_pop(uint8_t *b)
 void uart_tx(void *ctx, const uint8_t *data, size_t n)
 {
     (void)ctx;
-    for (size_t i = 0; i < n; i++) {
-        uint32_t h = tx_head;
-        uint32_t next = (h + 1u) & (TX_SIZE - 1u);
-        while (next == tx_tail) {
-            USART1->CR1 |= USART_CR1_TXEIE; /* full: make sure it drains, then wait */
-        }
-        tx_buf[h] = data[i];
-        tx_head = next;
-        if ((i & 63u) == 63u) {
-            USART1->CR1 |= USART_CR1_TXEIE; /* start sending before the frame is copied */
-        }
-    }
+    (void)lhb_txring_put(&tx_ring, data, n); /* whole or not at all; never waits */
     uint32_t p = irq_save();
     USART1->CR1 |= USART_CR1_TXEIE;
     irq_restore(p);
+}
+
+const lhb_txring_t *uart_tx_ring(void)
+{
+    return &tx_ring;
 }

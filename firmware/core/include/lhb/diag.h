@@ -16,6 +16,8 @@
 #define LHB_ST_WATCHDOG_RESET 0x040u  /* the last reset was caused by the independent watchdog */
 #define LHB_ST_CLOCK_TIMEOUT 0x080u   /* a clock-tree wait (PLL, over-drive, switch) timed out */
 #define LHB_ST_NOT_RUN 0x100u         /* no hardware self-test (virtual board) */
+#define LHB_ST_SDRAM_TIMEOUT 0x200u   /* the FMC stayed busy: SDRAM not initialised */
+#define LHB_ST_PERIPH_TIMEOUT 0x400u  /* a DMA stream or the watchdog did not answer in time */
 
 typedef struct {
     uint32_t selftest;          /* LHB_ST_* bits */
