@@ -145,3 +145,43 @@ def test_trajectory_key_refused_for_run_directory(capture_dir: Path, tmp_path: P
     err = capsys.readouterr().err
     assert "traj.toml" in err and "trajectory" in err
     assert not (tmp_path / "x").exists()
+
+
+def test_interrupted_run_resumes(capture_dir: Path, tmp_path: Path,
+                                 capsys: pytest.CaptureFixture) -> None:
+    """A method whose summary.json (written last) is there with the same inputs is kept by
+    --resume, the rest computed; without --resume or --force: one line saying how."""
+    config = write_config(capture_dir, 'board = "board.toml"\nangles = "angles.csv"\n'
+                          'methods = ["graph", "paper"]\n', "resume.toml")
+    out = tmp_path / "run"
+    assert main(["solve", str(config), "--output", str(out), "--quiet"]) == 0
+    graph_bytes = (out / "graph" / "stations.toml").read_bytes()
+    graph_summary = (out / "graph" / "summary.json").read_text()
+    paper_summary = json.loads((out / "paper" / "summary.json").read_text())
+    (out / "paper" / "summary.json").unlink()  # interrupted while writing the paper method
+    (out / "summary.json").unlink()
+    assert main(["solve", str(config), "--output", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "--resume" in err and "--force" in err
+    assert not (out / "paper" / "summary.json").exists()  # nothing written
+    assert main(["solve", str(config), "--output", str(out), "--resume"]) == 0
+    captured = capsys.readouterr()
+    assert "[graph] kept" in captured.err and "[paper] solving" in captured.err
+    assert "[graph] solving" not in captured.err
+    assert (out / "graph" / "stations.toml").read_bytes() == graph_bytes
+    assert (out / "graph" / "summary.json").read_text() == graph_summary
+    paper = json.loads((out / "paper" / "summary.json").read_text())
+    assert paper["stations"] == paper_summary["stations"]
+    assert json.loads((out / "summary.json").read_text())["kept"] == ["graph"]
+    assert "method graph" in captured.out and "method paper" in captured.out
+    # changed options: nothing kept (the resume key covers them)
+    (capture_dir / "resume2.toml").write_text(config.read_text() + "[graph]\nloss = \"huber\"\n")
+    messages: list[str] = []
+    run_to_directory(load_solve_config(capture_dir / "resume2.toml"), out,
+                     progress=messages.append, resume=True)
+    assert any(m == "[graph] solving" for m in messages)
+    assert any(m.startswith("[paper] kept") for m in messages)
+    # --resume is for run directories only
+    assert main(["solve", str(config), "--output", str(tmp_path / "s.toml"), "--resume",
+                 "--method", "graph", "--quiet"]) == 2
+    assert "--resume is for a run directory" in capsys.readouterr().err

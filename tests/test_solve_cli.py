@@ -34,3 +34,30 @@ def test_solve_flags_duration_and_no_overwrite(tmp_path, capsys):
     assert main(args) == 2
     assert "exists already" in capsys.readouterr().err
     assert main([*args, "--force"]) == 0
+
+
+def test_version_and_plain_progress(tmp_path, capsys):
+    import importlib.metadata
+
+    import pytest
+
+    import lhgraph
+
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    out = capsys.readouterr().out
+    assert out == f"lhgraph {importlib.metadata.version('lhgraph')}\n"
+    assert importlib.metadata.version("lhgraph") == lhgraph.__version__
+    sim = simulate(dataclasses.replace(load_simulation_config(CONFIG), duration_s=1.0), 3)
+    write_simulation(sim, tmp_path)
+    args = ["solve", "--board", str(tmp_path / "board.toml"), "--angles",
+            str(tmp_path / "angles.csv"), "--output", str(tmp_path / "r.toml")]
+    assert main(args) == 0
+    captured = capsys.readouterr()
+    assert "noise level learned:" in captured.err and "µrad per diode" in captured.err
+    assert "iteration 1: converging" in captured.err
+    assert "chi2" not in captured.err and "urad" not in captured.err.replace("µrad", "")
+    assert "sigma: length of the 1-sigma uncertainty" in captured.out
+    assert main([*args, "--force", "--verbose"]) == 0
+    assert "chi2/dof" in capsys.readouterr().err

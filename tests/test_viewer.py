@@ -85,3 +85,43 @@ def test_run_directory_board_found_from_summary(tmp_path: Path) -> None:
     run_to_directory(config, tmp_path / "run")
     scene = build_scene(tmp_path / "run", board_poses=2)
     assert len(scene.points) == 2 * len(sim.board.ids)
+
+
+@pytest.fixture(scope="module")
+def two_method_dir(run_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A multi-method run directory's layout: one run directory per method."""
+    import shutil
+
+    out = tmp_path_factory.mktemp("two")
+    for method in ("graph", "paper"):
+        shutil.copytree(run_dir, out / method)
+    return out
+
+
+def test_multi_method_run_directory(two_method_dir: Path, run_dir: Path, tmp_path: Path,
+                                    capsys: pytest.CaptureFixture) -> None:
+    one = build_scene(run_dir)
+    both = build_scene(two_method_dir)
+    assert len(both.segments) == 2 * len(one.segments)
+    assert len(build_scene(two_method_dir, method="paper").segments) == len(one.segments)
+    with pytest.raises(InputError, match="no method 'lm' here \\(methods: graph, paper\\)"):
+        build_scene(two_method_dir, method="lm")
+    png = tmp_path / "both.png"
+    assert main(["view", str(two_method_dir), "--export", str(png),
+                 "--renderer", "matplotlib"]) == 0
+    assert png.read_bytes()[:4] == b"\x89PNG" and "matplotlib" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("env", [{}, {"DISPLAY": ":987"}])
+def test_view_without_display_says_what_it_needs(run_dir: Path, env: dict[str, str],
+                                                 monkeypatch: pytest.MonkeyPatch,
+                                                 capsys: pytest.CaptureFixture) -> None:
+    for name in ("DISPLAY", "WAYLAND_DISPLAY"):
+        monkeypatch.delenv(name, raising=False)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    monkeypatch.setattr("sys.platform", "linux")
+    assert main(["view", str(run_dir)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert "display" in err and "--export FILE.png" in err

@@ -12,6 +12,7 @@ renderer when it works, else matplotlib). Open3D is imported only inside these f
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -164,13 +165,20 @@ def to_open3d(scene: Scene, point_radius_m: float = 0.01, line_radius_m: float =
 
 def display_problem() -> str | None:
     """Why no window can open here (None when a display seems available): on Linux an X11
-    or Wayland display must be named by ``DISPLAY`` or ``WAYLAND_DISPLAY``."""
+    or Wayland display must be named by ``DISPLAY`` or ``WAYLAND_DISPLAY``, and a local X
+    display's socket must exist (else Open3D falls back to an invisible offscreen window
+    and waits forever)."""
     import os
     import sys
 
-    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
-                                                 or os.environ.get("WAYLAND_DISPLAY")):
+    if not sys.platform.startswith("linux") or os.environ.get("WAYLAND_DISPLAY"):
+        return None
+    display = os.environ.get("DISPLAY", "")
+    if not display:
         return "no display (DISPLAY and WAYLAND_DISPLAY are unset)"
+    local = re.fullmatch(r":(\d+)(\.\d+)?", display)
+    if local and not Path(f"/tmp/.X11-unix/X{local[1]}").exists():
+        return f"display {display} is not running (no /tmp/.X11-unix/X{local[1]})"
     return None
 
 
