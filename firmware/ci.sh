@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Firmware CI: host build + unit tests + fuzz-corpus replay, then the STM32F429 cross build.
+# Firmware CI: host build + unit tests + fuzz-corpus replay, the corpus replayed again under
+# AddressSanitizer + UndefinedBehaviorSanitizer, then the STM32F429 cross build.
 #   bash firmware/ci.sh        (from the repository root or anywhere)
 # Installs what it needs with apt-get when missing (needs root, as on the project's CI).
 set -euo pipefail
@@ -13,6 +14,12 @@ command -v cc > /dev/null || need+=(gcc libc6-dev)
 command -v python3 > /dev/null || need+=(python3)
 command -v arm-none-eabi-gcc > /dev/null || need+=(gcc-arm-none-eabi)
 [ -d /usr/lib/arm-none-eabi/newlib ] || need+=(libnewlib-arm-none-eabi)
+# clang for the fuzz smoke: its sanitizer/fuzzer runtime is a separate package on Debian
+command -v clang > /dev/null || need+=(clang)
+if command -v clang > /dev/null && ! echo 'int main(void){return 0;}' \
+        | clang -x c -fsanitize=address -o /dev/null - > /dev/null 2>&1; then
+    need+=("libclang-rt-$(clang -dumpversion | cut -d. -f1)-dev")
+fi
 if [ "${#need[@]}" -gt 0 ]; then
     echo "firmware/ci.sh: installing ${need[*]}"
     export DEBIAN_FRONTEND=noninteractive
@@ -26,6 +33,19 @@ cmake --build build/firmware-host -j2 > /dev/null
 echo "== host tests"
 ctest --test-dir build/firmware-host --output-on-failure
 
+echo "== fuzz corpus under ASan/UBSan (build/firmware-asan)"
+mkdir -p build/firmware-asan
+SAN_CC="$(command -v cc)" # gcc: libasan/libubsan come with it
+"$SAN_CC" -std=c11 -g -O1 -fsanitize=address,undefined -fno-sanitize-recover=all \
+    -fno-omit-frame-pointer -Ifirmware/core/include firmware/core/src/*.c \
+    firmware/tests/fuzz_proto.c firmware/tests/fuzz_replay_main.c \
+    -o build/firmware-asan/fuzz_proto_replay
+python3 firmware/fuzz/make_seeds.py build/firmware-asan/seeds
+ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+    build/firmware-asan/fuzz_proto_replay firmware/tests/corpus
+ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+    build/firmware-asan/fuzz_proto_replay build/firmware-asan/seeds
+
 echo "== cross build (build/firmware-arm)"
 cmake -S firmware -B build/firmware-arm \
     -DCMAKE_TOOLCHAIN_FILE="$ROOT/firmware/cmake/arm-none-eabi.cmake" \
@@ -33,7 +53,7 @@ cmake -S firmware -B build/firmware-arm \
 cmake --build build/firmware-arm -j2 > /dev/null
 echo "== image size"
 arm-none-eabi-size -A build/firmware-arm/target/stm32f429/lhgraph-board.elf \
-    | grep -E '^(section|\.isr_vector|\.text|\.data|\.bss|\.ccm|\.sdram) '
+    | grep -E '^(section|\.isr_vector|\.text|\.data|\.bss|\.noinit|\.ccm|\.sdram) '
 arm-none-eabi-size build/firmware-arm/target/stm32f429/lhgraph-board.elf
 
 # a few seconds of fuzzing when clang is there (never updates the kept corpus)

@@ -23,10 +23,13 @@ from pathlib import Path
 import pytest
 
 from lhgraph.device.download import CaptureDownload, download_capture
+from lhgraph.device.link import BoardLink
 from lhgraph.device.progress import ProgressBar
 from lhgraph.device.protocol import (
+    CMD_INFO,
     CMD_READ,
     RESP_FLAG,
+    STATE_READY,
     BoardStatus,
     cobs_decode,
     cobs_encode,
@@ -151,7 +154,76 @@ def test_status_parse_rejects_wrong_size() -> None:
         BoardStatus.parse(b"\x00" * 39)
 
 
+def test_status_parse_first_firmware_and_health_fields() -> None:
+    v1 = struct.pack("<BBHIIIIIIIII", 3, 0, 0, 200, 0, 10, 10, 5, 160, 0xABC, 4096, 1)
+    st = BoardStatus.parse(v1)
+    assert st.state_name == "ready" and not st.health_reported and st.problems() == ()
+    health = struct.pack("<13I", 0x010 | 0x020, 7999, 0x08001234, 0xFFFFFFF9, 0x400, 0x40000000,
+                         2, 51_000, 184_320, 1, 0, 1, 0x24)
+    st = BoardStatus.parse(v1 + health + b"future")  # later firmware may append more
+    assert st.health_reported and st.hse_khz == 7999 and st.fault_pc == 0x08001234
+    assert st.isr_cycles_max == 51_000 and st.isr_cycles_budget == 184_320
+    assert st.blocks_unread == 1 and st.frames_timed_out == 1
+    assert st.problems() == ("SDRAM retention test failed", "the board reset after a fault",
+                             "2 sample half-buffers lost since boot")
+    with pytest.raises(DeviceError, match="at least 92"):
+        BoardStatus.parse(v1 + health[:-4])
+
+
 # --- end to end ----------------------------------------------------------------------------------
+
+
+def _record_without_download(port: str) -> BoardStatus:
+    """ARM a short capture and wait until it is ready, reading none of it."""
+    with BoardLink(port) as link:
+        link.arm(200)
+        deadline = time.monotonic() + 20
+        while (st := link.status()).state != STATE_READY:
+            assert time.monotonic() < deadline, st
+            time.sleep(0.02)
+        return st
+
+
+def test_arm_keeps_a_capture_not_downloaded(virtual_board: Path, capture: tuple[Path, bytes],
+                                            tmp_path: Path) -> None:
+    src, data = capture
+    out = tmp_path / "next.lhcap"
+    with board(virtual_board, src) as port:
+        st = _record_without_download(port)
+        assert st.health_reported and st.blocks_unread == st.block_count == 6
+        assert st.self_test == 0x100 and st.problems() == ()  # virtual board: no self-test
+        with pytest.raises(DeviceError, match="not downloaded.*--discard-previous"):
+            fetch(port, out)
+        assert not out.exists()
+        cli = [sys.executable, "-m", "lhgraph", "capture", "--port", port, "--output", str(out),
+               "--duration", "0.2", "--quiet"]
+        proc = subprocess.run(cli, capture_output=True, text=True, cwd=REPO, timeout=60)
+        assert proc.returncode == 1 and proc.stderr.count("\n") == 1
+        assert "--discard-previous" in proc.stderr and "--no-arm" in proc.stderr
+        assert "Traceback" not in proc.stderr and not out.exists()
+        # the refused capture is still there, and can be downloaded
+        fetch(port, out, arm=False)
+        assert out.read_bytes() == data
+        # downloaded: recording again needs no flag; an unread one is dropped when asked
+        _record_without_download(port)
+        proc = subprocess.run([*cli, "--force", "--discard-previous"], capture_output=True,
+                              text=True, cwd=REPO, timeout=60)
+        assert proc.returncode == 0, proc.stderr
+        assert out.read_bytes() == data
+
+
+def test_partial_frame_times_out(virtual_board: Path, capture: tuple[Path, bytes]) -> None:
+    src, _ = capture
+    with board(virtual_board, src) as port:
+        fd = os.open(port, os.O_RDWR | os.O_NOCTTY)
+        try:
+            os.write(fd, encode_frame(CMD_INFO, 1)[:3])  # half a frame, then silence
+        finally:
+            os.close(fd)
+        time.sleep(0.3)  # > the board's 100 ms frame timeout
+        with BoardLink(port) as link:
+            st = link.status()
+    assert st.frames_timed_out == 1
 
 
 def test_download_api_byte_identical(virtual_board: Path, capture: tuple[Path, bytes],

@@ -433,6 +433,8 @@ int main(int argc, char **argv)
     g_cap.fixed_samples = (uint32_t)g_hdr.capture_samples;
     g_cap.fixed_start_time = true;
     lhb_proto_init(&g_proto, &g_cap, g_opt.block_size, tx_bytes, NULL);
+    static lhb_diag_t diag = {.selftest = LHB_ST_NOT_RUN}; /* no hardware to test */
+    g_proto.diag = &diag;
 
     g_pty.master = g_pty.slave_keep = -1;
     if (pty_open(&g_pty) != 0) {

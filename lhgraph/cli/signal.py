@@ -76,6 +76,9 @@ def add_capture(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--baud", type=int, default=6_000_000, help="baud rate (default 6000000)")
     p.add_argument("--no-arm", action="store_true",
                    help="download the capture the board already holds; do not record")
+    p.add_argument("--discard-previous", action="store_true",
+                   help="record even if the board holds a capture that was not downloaded "
+                   "(it is lost); without this the board refuses")
     add_common_output(p)
     return p
 
@@ -88,7 +91,8 @@ def run_capture(args: argparse.Namespace) -> int:
     try:
         result = download_capture(args.port, args.output, duration_s=args.duration,
                                   overwrite=args.force, progress=bar, baudrate=args.baud,
-                                  start_delay_s=args.delay, arm=not args.no_arm)
+                                  start_delay_s=args.delay, arm=not args.no_arm,
+                                  discard_previous=args.discard_previous)
     finally:
         if bar is not None:
             bar.close()

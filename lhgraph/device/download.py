@@ -25,11 +25,13 @@ from pathlib import Path
 from lhgraph.device.link import DEFAULT_BAUDRATE, BoardLink, PortOpener
 from lhgraph.device.progress import Progress
 from lhgraph.device.protocol import (
+    E_UNREAD,
     PROTOCOL_VERSION,
     STATE_ARMED,
     STATE_CAPTURING,
     STATE_IDLE,
     STATE_READY,
+    BoardRefused,
     BoardStatus,
 )
 from lhgraph.errors import DeviceError, InputError
@@ -57,6 +59,7 @@ class CaptureDownload:
     reconnects: int
     capture_s: float
     download_s: float
+    board_problems: tuple[str, ...] = ()
 
     @property
     def duration_s(self) -> float:
@@ -67,6 +70,8 @@ class CaptureDownload:
         """One line for humans."""
         rate = self.size_bytes / self.download_s / 1e3 if self.download_s > 0 else float("inf")
         extra = "; OVERFLOWED (capture stopped early)" if self.overflowed else ""
+        if self.board_problems:
+            extra += "; BOARD: " + "; ".join(self.board_problems)
         return (f"wrote {self.path}: {self.n_records} edge records, {self.duration_s:.3f} s, "
                 f"{self.size_bytes} bytes in {self.download_s:.2f} s ({rate:.0f} kB/s), "
                 f"{self.blocks_rerequested} blocks re-requested, "
@@ -105,11 +110,14 @@ def download_capture(port: str, output_path: str | os.PathLike[str], duration_s:
                      arm: bool = True, timeout_s: float = 0.5, window: int = 4,
                      max_reconnects: int = 5, reopen_attempts: int = 12,
                      opener: PortOpener | None = None,
-                     poll_interval_s: float = 0.05) -> CaptureDownload:
+                     poll_interval_s: float = 0.05,
+                     discard_previous: bool = False) -> CaptureDownload:
     """Arm the board on ``port``, wait for the capture, download it to ``output_path``.
 
     ``duration_s`` and ``start_delay_s`` go to the board's ARM command; ``arm=False``
-    downloads the capture the board already holds (state ``ready``). ``progress`` is called
+    downloads the capture the board already holds (state ``ready``). The board refuses to
+    record over a capture that was not downloaded; ``discard_previous`` drops it (without it
+    such a refusal is a DeviceError saying what to do). ``progress`` is called
     as ``progress(phase, done, total)`` (see :data:`Progress`). A lost port is re-opened up
     to ``reopen_attempts`` times per loss (backing off to 1 s), for at most
     ``max_reconnects`` losses. Raises
@@ -143,7 +151,7 @@ def download_capture(port: str, output_path: str | os.PathLike[str], duration_s:
             st = link.status()
             if st.state in (STATE_ARMED, STATE_CAPTURING):
                 link.abort()
-            link.arm(duration_ms, delay_ms)
+            _arm(link, port, duration_ms, delay_ms, discard_previous)
             status = _wait_ready(link, duration_s + start_delay_s, progress, poll_interval_s)
         else:
             status = link.status()
@@ -171,7 +179,23 @@ def download_capture(port: str, output_path: str | os.PathLike[str], duration_s:
         sample_rate_hz=sample_rate, board_id=board_id, firmware_version=fw,
         overflowed=bool(flags & 1), crc32=status.image_crc, blocks=status.block_count,
         blocks_rerequested=rerequested, reconnects=link.reconnects, capture_s=capture_s,
-        download_s=download_s)
+        download_s=download_s, board_problems=status.problems())
+
+
+def _arm(link: BoardLink, port: str, duration_ms: int, delay_ms: int,
+         discard_previous: bool) -> None:
+    """ARM; a refusal to drop an undownloaded capture becomes a DeviceError that says how."""
+    try:
+        link.arm(duration_ms, delay_ms, discard_previous=discard_previous)
+    except BoardRefused as exc:
+        if exc.code != E_UNREAD:
+            raise
+        st = link.status()
+        raise DeviceError(
+            f"the board on {port} holds a capture that was not downloaded "
+            f"({st.blocks_unread} of {st.block_count} blocks never read): download it with "
+            f"`lhgraph capture --no-arm --port {port} --output FILE`, or record over it with "
+            "--discard-previous") from None
 
 
 def _wait_ready(link: BoardLink, expected_s: float, progress: Progress | None,

@@ -17,11 +17,13 @@ from typing import Protocol
 
 from lhgraph.device.progress import Progress
 from lhgraph.device.protocol import (
+    ARM_DISCARD,
     CMD_ABORT,
     CMD_ARM,
     CMD_INFO,
     CMD_READ,
     CMD_STATUS,
+    E_LENGTH,
     MAX_WIRE_FRAME,
     RESP_ERROR,
     RESP_FLAG,
@@ -227,12 +229,23 @@ class BoardLink:
         """ABORT: back to idle."""
         return BoardStatus.parse(self.request(CMD_ABORT).payload)
 
-    def arm(self, duration_ms: int, delay_ms: int = 0) -> BoardStatus:
-        """ARM a capture of ``duration_ms`` starting after ``delay_ms``."""
+    def arm(self, duration_ms: int, delay_ms: int = 0, *,
+            discard_previous: bool = False) -> BoardStatus:
+        """ARM a capture of ``duration_ms`` starting after ``delay_ms``.
+
+        The board refuses (:data:`E_UNREAD`) to drop a capture that was not downloaded,
+        unless ``discard_previous``; firmware without that rule drops it anyway.
+        """
         host_us = time.time_ns() // 1000
         payload = struct.pack("<IIQ", duration_ms, delay_ms, host_us)
         try:
-            return BoardStatus.parse(self.request(CMD_ARM, payload).payload)
+            try:
+                flags = struct.pack("<I", ARM_DISCARD) if discard_previous else b""
+                return BoardStatus.parse(self.request(CMD_ARM, payload + flags).payload)
+            except BoardRefused as exc:
+                if not (discard_previous and exc.code == E_LENGTH):
+                    raise  # E_LENGTH: firmware without ARM flags, which never asks
+                return BoardStatus.parse(self.request(CMD_ARM, payload).payload)
         except BoardRefused as exc:
             # our first ARM may have been executed and only its answer lost
             if exc.code == 6:

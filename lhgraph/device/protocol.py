@@ -28,6 +28,8 @@ STATE_IDLE, STATE_ARMED, STATE_CAPTURING, STATE_READY = 0, 1, 2, 3
 STATE_NAMES = {0: "idle", 1: "armed", 2: "capturing", 3: "ready"}
 
 E_CRC, E_FRAMING, E_TOO_LONG = 1, 2, 3
+E_LENGTH = 4
+E_UNREAD = 10
 ERROR_NAMES = {
     1: "bad frame CRC",
     2: "bad framing",
@@ -38,7 +40,24 @@ ERROR_NAMES = {
     7: "argument out of range",
     8: "block index out of range",
     9: "hardware error",
+    10: "the board holds a capture that was not downloaded",
 }
+ARM_DISCARD = 0x1
+"""ARM flag: drop a capture the board holds that was not downloaded (docs/protocol.md)."""
+
+SELF_TEST_PROBLEMS = {
+    0x001: "HSE crystal did not start (running from the internal oscillator, timing +-1 %)",
+    0x002: "HSE crystal frequency is not the configured one",
+    0x004: "SDRAM data/address bus test failed",
+    0x008: "SDRAM march test failed",
+    0x010: "SDRAM retention test failed",
+    0x020: "the board reset after a fault",
+    0x040: "the board reset by its watchdog",
+    0x080: "a clock-tree wait timed out",
+    0x200: "SDRAM controller timed out",
+    0x400: "a DMA stream or the watchdog timed out",
+}
+"""STATUS self-test bits (byte 40) that mean something went wrong; 0x100 = not run."""
 TRANSIENT_ERRORS = frozenset({E_CRC, E_FRAMING, E_TOO_LONG})
 
 FRAME_OVERHEAD = 8
@@ -113,6 +132,7 @@ def decode_frame(encoded: bytes) -> Frame:
 
 _INFO = struct.Struct("<HHIIIIII")
 _STATUS = struct.Struct("<BBHIIIIIIIII")
+_HEALTH = struct.Struct("<13I")
 
 
 def _unpack_answer(name: str, layout: struct.Struct, payload: bytes) -> tuple[int, ...]:
@@ -143,7 +163,12 @@ class BoardInfo:
 
 @dataclass(frozen=True)
 class BoardStatus:
-    """Answer to STATUS (also to ARM and ABORT)."""
+    """Answer to STATUS (also to ARM and ABORT).
+
+    The first 40 bytes are every firmware's; the health fields (bytes 40..91) come from
+    firmware that reports them (``health_reported``) and are 0 otherwise. Cycle counts are
+    CPU cycles at 180 MHz.
+    """
 
     state: int
     hw_error: int
@@ -157,16 +182,43 @@ class BoardStatus:
     image_crc: int
     block_size: int
     block_count: int
+    self_test: int = 0
+    hse_khz: int = 0
+    fault_pc: int = 0
+    fault_lr: int = 0
+    fault_cfsr: int = 0
+    fault_hfsr: int = 0
+    dma_overruns: int = 0
+    isr_cycles_max: int = 0
+    isr_cycles_budget: int = 0
+    frames_timed_out: int = 0
+    tx_dropped: int = 0
+    blocks_unread: int = 0
+    reset_cause: int = 0
+    health_reported: bool = False
 
     @classmethod
     def parse(cls, payload: bytes) -> BoardStatus:
-        """Decode a STATUS payload (40 bytes)."""
-        return cls(*_unpack_answer("STATUS", _STATUS, payload))
+        """Decode a STATUS payload: 40 bytes, or 92 or more with the health fields."""
+        if len(payload) == _STATUS.size:
+            return cls(*_STATUS.unpack(payload))
+        if len(payload) < _STATUS.size + _HEALTH.size:
+            raise DeviceError(f"STATUS answer has {len(payload)} bytes, expected "
+                              f"{_STATUS.size} or at least {_STATUS.size + _HEALTH.size}")
+        return cls(*_STATUS.unpack_from(payload), *_HEALTH.unpack_from(payload, _STATUS.size),
+                   health_reported=True)
 
     @property
     def state_name(self) -> str:
         """``idle``, ``armed``, ``capturing`` or ``ready``."""
         return STATE_NAMES.get(self.state, f"state {self.state}")
+
+    def problems(self) -> tuple[str, ...]:
+        """The board's self-test failures and lost data, one phrase each (empty if none)."""
+        out = [text for bit, text in SELF_TEST_PROBLEMS.items() if self.self_test & bit]
+        if self.dma_overruns:
+            out.append(f"{self.dma_overruns} sample half-buffers lost since boot")
+        return tuple(out)
 
 
 def is_rejected_request(frame: Frame) -> bool:
