@@ -29,15 +29,14 @@ class _Version(argparse.Action):
 
 
 def version() -> str:
-    """The installed distribution's version, else :data:`lhgraph.__version__`."""
+    """The installed distribution's version (``lhgraph.__version__``, kept equal by
+    tests/test_solve_cli.py)."""
     import importlib.metadata
-
-    import lhgraph
 
     try:
         return importlib.metadata.version("lhgraph")
     except importlib.metadata.PackageNotFoundError:
-        return lhgraph.__version__
+        return "unknown (not installed: pip install -e .)"
 
 
 def build_parser() -> argparse.ArgumentParser:
