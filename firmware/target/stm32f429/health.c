@@ -145,7 +145,8 @@ void fault_record_and_reset(const uint32_t *frame, uint32_t ipsr)
     fault_record.magic = FAULT_MAGIC;
     fault_record.check = record_check(&fault_record);
     led_set(true);
-    delay_cycles(BOARD_SYSCLK_HZ / 4u); /* ~0.25 s of steady light (less on the HSI) */
+    cycles_init(); /* the fault may precede main's cycles_init: the delay needs the counter */
+    delay_cycles(BOARD_SYSCLK_HZ / 4u); /* ~0.25 s of steady light (more on the HSI) */
     dsb();
     SCB_AIRCR = SCB_AIRCR_RESET;
     dsb();
