@@ -13,7 +13,10 @@ initialiser (:func:`~lhgraph.estimation.init.pnp_kabsch.join_paths`).
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -161,7 +164,9 @@ class FewDiodeInitialiser:
 
     def __call__(self, board: Board, angles: Angles, problem: GraphProblem) -> Initialisation:
         S = len(problem.station_ids)
-        twins = [twin_path(board, angles, problem, slot) for slot in range(S)]
+        # the stations in parallel threads (numpy releases the GIL in its array loops)
+        with ThreadPoolExecutor(max_workers=min(S, len(os.sched_getaffinity(0)))) as pool:
+            twins = list(pool.map(partial(twin_path, board, angles, problem), range(S)))
         # pass 1: each station's twins by their own fit; stations joined on those paths
         paths = [chosen_path(tw, tw.emission, self.turn_sigma) for tw in twins]
         L0, overlap = join_paths(board, problem, self._floored(paths), self.max_gap_s)
