@@ -30,8 +30,9 @@ AXIS_LENGTH_M = 0.3
 AXIS_COLOURS = ("tab:red", "tab:green", "tab:blue")
 AXIS_NAMES = ("azimuth", "elevation")
 STYLE = """body{font-family:sans-serif;max-width:1100px;margin:1em auto;color:#222}
-table{border-collapse:collapse;margin:0.5em 0;font-size:0.85em}td,th{border:1px solid #bbb;padding:2px 6px;
-text-align:right;white-space:nowrap}th{background:#eee;white-space:normal}img{max-width:100%}pre{background:#f6f6f6;padding:0.5em}
+table{border-collapse:collapse;margin:0.5em 0;font-size:0.85em}
+td,th{border:1px solid #bbb;padding:2px 6px;text-align:right;white-space:nowrap}
+th{background:#eee;white-space:normal}img{max-width:100%}pre{background:#f6f6f6;padding:0.5em}
 .warn{color:#a40}.verdict{font-size:1.2em;padding:0.4em 0.8em;border-radius:4px}
 .ok{background:#e3f4e1}.check{background:#fbeed5}.note{color:#555;font-size:0.9em}"""
 
