@@ -43,7 +43,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-FAMILIES = sorted(p.stem for p in (ROOT / "configs/simulation").glob("*.toml"))
 
 
 def worktree(stack: ExitStack, rev: str) -> Path:
@@ -56,18 +55,32 @@ def worktree(stack: ExitStack, rev: str) -> Path:
     return path
 
 
-def lhgraph(tree: Path, *args: str, **kw) -> subprocess.CompletedProcess:
-    """Run ``python -m lhgraph ARGS`` from ``tree``'s code."""
-    env = dict(os.environ, PYTHONPATH=str(tree), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    return subprocess.run([sys.executable, "-m", "lhgraph", *args], env=env, check=True,
-                          capture_output=True, text=True, **kw)
+def tree_env(tree: Path) -> dict[str, str]:
+    """The environment that makes ``python -m lhgraph`` run ``tree``'s code."""
+    return dict(os.environ, PYTHONPATH=str(tree), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
 
 
-def timed(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
-    """(wall s, CPU s) of one whole process."""
+def lhgraph(tree: Path, *args: str) -> subprocess.CompletedProcess:
+    """Run ``python -m lhgraph ARGS`` with ``tree``'s code (started in ``tree``: ``-m`` puts
+    the working directory ahead of ``PYTHONPATH``)."""
+    return subprocess.run([sys.executable, "-m", "lhgraph", *args], env=tree_env(tree),
+                          cwd=tree, check=True, capture_output=True, text=True)
+
+
+def check_code(tree: Path) -> None:
+    """Refuse to compare unless ``python -m lhgraph`` really imports ``tree``'s package."""
+    found = subprocess.run([sys.executable, "-c", "import lhgraph; print(lhgraph.__file__)"],
+                           env=tree_env(tree), cwd=tree, check=True, capture_output=True,
+                           text=True).stdout.strip()
+    if not Path(found).resolve().is_relative_to(tree.resolve()):
+        raise SystemExit(f"{tree}: python imports lhgraph from {found}, not from this tree")
+
+
+def timed(cmd: list[str], tree: Path) -> tuple[float, float]:
+    """(wall s, CPU s) of one whole process running ``tree``'s code."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     tic = time.perf_counter()
-    subprocess.run(cmd, env=env, check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(cmd, env=tree_env(tree), cwd=tree, check=True, stdout=subprocess.DEVNULL)
     wall = time.perf_counter() - tic
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -88,10 +101,13 @@ def answers(base: Path, head: Path, work: Path, seeds: int) -> list[str]:
     worst_p = worst_r = 0.0
     same_iter = 0
     n = 0
-    for family in FAMILIES:
+    # the families both revisions have (a newer config may use keys the base does not know)
+    families = sorted({p.stem for p in (base / "configs/simulation").glob("*.toml")}
+                      & {p.stem for p in (head / "configs/simulation").glob("*.toml")})
+    for family in families:
         for seed in range(1, seeds + 1):
             cap = work / f"{family}-{seed}"
-            lhgraph(base, "simulate", str(ROOT / "configs/simulation" / f"{family}.toml"),
+            lhgraph(base, "simulate", str(base / "configs/simulation" / f"{family}.toml"),
                     "--seed", str(seed), "--output", str(cap))
             calibration = 'calibration = "ootx.toml"\n' if (cap / "ootx.toml").exists() else ""
             (cap / "solve.toml").write_text(
@@ -120,7 +136,7 @@ def answers(base: Path, head: Path, work: Path, seeds: int) -> list[str]:
                         f"{sb['final_error']:.6g} / {sh['final_error']:.6g} |")
             print(rows[-1], flush=True)
     return ["## 1. Same answers", "",
-            f"{n} simulated captures ({len(FAMILIES)} families x {seeds} seeds), graph method: "
+            f"{n} simulated captures ({len(families)} families x {seeds} seeds), graph method: "
             f"largest station difference between the revisions {worst_p * 1e3:.2e} mm / "
             f"{worst_r:.1e} deg; same LM iteration count on {same_iter} of {n}.", "", *rows, ""]
 
@@ -137,8 +153,7 @@ def timing(base: Path, head: Path, work: Path, runs: int) -> list[str]:
     """Section 2: the whole process, alternating."""
     cap = work / "default-8s"
     lhgraph(base, "simulate", "--seed", "1", "--output", str(cap))
-    envs = {name: dict(os.environ, PYTHONPATH=str(tree), OMP_NUM_THREADS="1",
-                       OPENBLAS_NUM_THREADS="1") for name, tree in (("base", base), ("head", head))}
+    trees = {"base": base, "head": head, "bare": base}
     for tree in (base, head):
         subprocess.run([sys.executable, "-m", "compileall", "-q", str(tree / "lhgraph")],
                        check=True)
@@ -147,15 +162,15 @@ def timing(base: Path, head: Path, work: Path, runs: int) -> list[str]:
              "--quiet"]
     bare = [sys.executable, "-c", "import numpy, gtsam"]
     for name in ("base", "head"):  # warm-up
-        timed(solve, envs[name])
+        timed(solve, trees[name])
     wall: dict[str, list[float]] = {"base": [], "head": [], "bare": []}
     cpu: dict[str, list[float]] = {"base": [], "head": [], "bare": []}
     for _ in range(runs):
         for name in ("base", "head"):
-            w, c = timed(solve, envs[name])
+            w, c = timed(solve, trees[name])
             wall[name].append(w)
             cpu[name].append(c)
-        w, c = timed(bare, envs["base"])
+        w, c = timed(bare, trees["bare"])
         wall["bare"].append(w)
         cpu["bare"].append(c)
     ratio = np.array(wall["head"]) / np.array(wall["base"])
@@ -190,6 +205,8 @@ def main() -> int:
         base = worktree(stack, args.base)
         head = worktree(stack, args.head) if args.head else ROOT
         work = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="lhgraph-ab-")))
+        for tree in (base, head):
+            check_code(tree)
         rev = {name: subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", r],
                                     capture_output=True, text=True, check=True).stdout.strip()
                for name, r in (("base", args.base), ("head", args.head or "HEAD"))}
