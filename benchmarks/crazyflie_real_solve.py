@@ -1,0 +1,111 @@
+"""Our calibration of the shared Crazyflie LH1 log against cfclient's, on issue #14's measure
+(b), with the two hit-time models of the log.
+
+    python3 benchmarks/crazyflie_real_solve.py [--import-dir DIR] [--work DIR]
+        [--output docs/results/crazyflie_real_solve.md]
+
+1. ``lhgraph import crazyflie`` of the shared log (or ``--import-dir``, its output).
+2. ``lhgraph solve`` (graph, the deck, the log's ``ootx.toml``) twice:
+   - *hit times*: the importer's ``time`` column (the log stamp moved back to the moment the
+     laser crossed the diode, from the deck's slot timing: docs/crazyflie.md);
+   - *log stamps*: the same hits with the log's own stamps (``log_time``, sorted) as times,
+     which the solver recognises as co-logged sweeps and puts on each station's fitted
+     rotor grid, one board state per logged cycle (:mod:`lhgraph.estimation.sweep_times`).
+     This is an experiment, not a file the contract allows as such (its ``time`` is not the
+     hit time): it shows what the grid fit gives on real data.
+3. ``benchmarks/crazyflie_evaluation.py`` (b) for cfclient's geometry and both of ours.
+Skips (exit 0, one line) without the shared data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from lhgraph.io.angles import Angles, load_angles, save_angles
+from lhgraph.io.stations import load_stations
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")
+
+
+def lhgraph(*args: str) -> tuple[str, float]:
+    """Run ``python -m lhgraph ARGS``: (stdout + stderr, wall seconds)."""
+    tic = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "lhgraph", *args], capture_output=True,
+                          text=True, check=True)
+    return proc.stdout + proc.stderr, time.perf_counter() - tic
+
+
+def with_log_stamps(angles: Angles) -> Angles:
+    """The hits with their log stamps as times, in stamp order (contract columns only)."""
+    stamp = angles.extra["log_time"]
+    order = np.argsort(stamp, kind="stable")
+    return Angles(stamp[order], angles.lighthouse[order], angles.axis[order],
+                  angles.sensor[order], angles.angle[order])
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--import-dir", type=Path, help="output of lhgraph import crazyflie")
+    ap.add_argument("--work", type=Path, help="where the solutions go (default: a temp dir)")
+    ap.add_argument("--output", type=Path,
+                    default=ROOT / "docs/results/crazyflie_real_solve.md")
+    args = ap.parse_args()
+    if args.import_dir is None and not DATA.is_dir():
+        print(f"{DATA}: not there, nothing measured")
+        return 0
+    tmp = tempfile.TemporaryDirectory()
+    work = args.work or Path(tmp.name)
+    work.mkdir(parents=True, exist_ok=True)
+    imp = args.import_dir
+    if imp is None:
+        imp = work / "import"
+        lhgraph("import", "crazyflie", str(DATA / "log02"), "--system-config",
+                str(DATA / "system-config.yaml"), "--mocap", str(DATA / "mocap02.npy"),
+                "--output", str(imp), "--force")
+    save_angles(with_log_stamps(load_angles(imp / "angles.csv")), work / "angles-stamps.csv",
+                overwrite=True)
+    rows, geometries = [], [f"cfclient={imp / 'stations-cfclient.toml'}"]
+    for name, angles in (("hit times", imp / "angles.csv"),
+                         ("log stamps", work / "angles-stamps.csv")):
+        out = work / f"stations-{name.replace(' ', '-')}.toml"
+        text, seconds = lhgraph("solve", "--board", str(imp / "board.toml"), "--angles",
+                                str(angles), "--calibration", str(imp / "ootx.toml"),
+                                "--output", str(out), "--force", "--verbose")
+        st = load_stations(out)
+        T_0_1 = np.linalg.inv(st.pose(0)) @ st.pose(1)
+        its = [ln for ln in text.splitlines() if ln.strip().startswith("iteration")]
+        res = next((ln.strip() for ln in text.splitlines() if ln.startswith("residuals")), "")
+        rows.append(f"| {name} | {len(its)} | {res.removeprefix('residuals: ')} | "
+                    f"{np.linalg.norm(T_0_1[:3, 3]):.4f} | {seconds:.0f} |")
+        geometries.append(f"ours ({name})={out}")
+    evaluation = work / "evaluation.md"
+    subprocess.run([sys.executable, str(ROOT / "benchmarks/crazyflie_evaluation.py"),
+                    "--import-dir", str(imp), "--output", str(evaluation), "--stations",
+                    *geometries], check=True, capture_output=True)
+    cf = load_stations(imp / "stations-cfclient.toml")
+    d_cf = np.linalg.norm((np.linalg.inv(cf.pose(0)) @ cf.pose(1))[:3, 3])
+    table = [line for line in evaluation.read_text().splitlines() if line.startswith("|")]
+    lines = ["# The shared Crazyflie LH1 log calibrated by lhgraph", "",
+             "`python3 benchmarks/crazyflie_real_solve.py` (docs/crazyflie.md).", "",
+             "## Solves", "",
+             "| times | LM iterations | residuals | station distance (m) | solve s |",
+             "|---|---|---|---|---|", *rows, "",
+             f"cfclient's station distance: {d_cf:.4f} m.", "",
+             "## Measure (b): the log's correctedAngle as crossing-beam positions vs Qualisys",
+             "", "Position error (mm) after the best rigid fit (benchmarks/"
+             "crazyflie_evaluation.py).", "", *table[:2 + len(geometries)], ""]
+    args.output.write_text("\n".join(lines))
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
