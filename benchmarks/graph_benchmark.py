@@ -118,7 +118,7 @@ def main() -> int:
               f"{np.median(nees):.2f} (dof 6; target mean within [3, 12])",
               f"- solve time per capture (in-process, {args.jobs} parallel jobs): median "
               f"{np.median([r['seconds'] for r in rows]):.2f} s",
-              f"- residual rms median {np.median([r['rms_urad'] for r in rows]):.1f} urad", ""]
+              f"- residual rms median {np.median([r['rms_urad'] for r in rows]):.1f} µrad", ""]
     print("\n".join(lines), flush=True)
 
     # 2. speed sweep and 3. reflections

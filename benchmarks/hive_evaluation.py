@@ -60,7 +60,7 @@ PAPER_NOTE = ("The paper method's residuals are predicted from its only board pa
               "they include the interpolation error of a fast-moving tracker and of gaps; its "
               "trajectory is that path (reference-station poses only).")
 
-# inlier fractions compare models only at one fixed per-diode sigma (40 urad)
+# inlier fractions compare models only at one fixed per-diode sigma (40 µrad)
 FIXED_SIGMA = GraphOptions(adapt_angle_sigma=False)
 
 

@@ -58,7 +58,7 @@ def main() -> int:
              "sensor's median angle at rest. Split at half the expected gap "
              f"({expected * 1e3:.3f} mrad = 2 pi 60 Hz x 20.83 us, the OOTX data bit's length).",
              "", "| station | axis | sweeps | sensors | sweeps in the low level | level gap "
-             "(mrad) | spread within the levels (urad rms) | range of the common offsets "
+             "(mrad) | spread within the levels (µrad rms) | range of the common offsets "
              "(mrad) |", "|---|---|---|---|---|---|---|---|"]
     for station in rest.stations():
         for axis in (0, 1):

@@ -55,7 +55,7 @@ def main() -> int:
              f"{time.strftime('%Y-%m-%d')}; {len(decoded.angles)} decoded HMD hits (static HMD, "
              "two stations facing each other).", "",
              "| model | station distance (m) | relative rotation (deg) | median abs residual "
-             "(urad) | inlier fraction | solve (s) |", "|---|---|---|---|---|---|",
+             "(µrad) | inlier fraction | solve (s) |", "|---|---|---|---|---|---|",
              f"| libsurvive's own solution | {d_ls:.4f} | {a_ls:.3f} | | | |"]
     variants = [("no factory calibration", None)] + [
         (f"OOTX, gib {g:+.0f}, curve {c:+.0f}", Convention(g, c))

@@ -134,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
         f"Position error norm: median {np.median(norms):.1f} mm, max {np.max(norms):.1f} mm. "
         f"Run time per capture: median {np.median(seconds):.1f} s (max {np.max(seconds):.1f} s); "
         f"wall time {wall / 60:.1f} min. Median per-hit residual RMS "
-        f"{np.median([r['rms_urad'] for r in ok]):.0f} urad.",
+        f"{np.median([r['rms_urad'] for r in ok]):.0f} µrad.",
         "",
         "Per setup:",
         "",

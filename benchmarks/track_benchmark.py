@@ -8,7 +8,7 @@ Captures (the true stations and factory calibration given to the tracker):
 2. the Crazyflie deck (4 diodes) on the default layout, 20 s, 30 % of hits dropped (exact hit
    times), 2 seeds;
 3. the deck with the character of a real deck log (configs/simulation/deck.toml: 1.5 m/s
-   hand-held, 24 MHz timing, 65 urad noise, factory calibration, half the cycles logged,
+   hand-held, 24 MHz timing, 65 µrad noise, factory calibration, half the cycles logged,
    18 % of sweeps losing one half of the deck), first 40 s: (a) its hits re-timed from the
    log stamps by the slot pattern (what an importer gives: the per-cycle stamp jitter
    remains), (b) the log stamps taken as hit times (both sweeps of a cycle at one instant).
