@@ -223,6 +223,24 @@ def _solve_candidates(
     return _refine(T, meas, mask, positions, model, iterations - first, huber_rad)
 
 
+def _seen_measurements(azimuth: Array, elevation: Array, min_sensors: int
+                       ) -> tuple[NDArray[np.int64], NDArray[np.bool_], Array, Array,
+                                  NDArray[np.bool_]]:
+    """What both planar solvers start from: sensors seen on both axes per measurement ``n``
+    (M,), the measurements with at least ``min_sensors`` of them ``ok`` (M,), and for those
+    the angle pairs ``meas`` (K, S, 2; 0 where unseen), their tangents ``uv`` and the seen
+    mask (K, S)."""
+    azimuth = np.asarray(azimuth, dtype=float)
+    elevation = np.asarray(elevation, dtype=float)
+    mask = np.isfinite(azimuth) & np.isfinite(elevation)
+    n = mask.sum(axis=1)
+    ok = n >= min_sensors
+    az, el = azimuth[ok], elevation[ok]
+    meas = np.stack([np.nan_to_num(az), np.nan_to_num(el)], axis=-1)
+    uv = np.stack([np.tan(az), np.tan(el)], axis=-1)
+    return n, ok, meas, uv, mask[ok]
+
+
 @dataclass(frozen=True)
 class PlanarTwins:
     """Both solutions of the planar mirror ambiguity per measurement: ``T_lh_board``
@@ -246,19 +264,12 @@ def planar_twins(azimuth: Array, elevation: Array, positions: Array, normals: Ar
     resolve_twins` picks the temporally consistent one). Measurements with fewer than
     ``min_sensors`` sensors on both axes, or a twin behind the station, get NaN.
     """
-    azimuth = np.asarray(azimuth, dtype=float)
-    elevation = np.asarray(elevation, dtype=float)
-    mask = np.isfinite(azimuth) & np.isfinite(elevation)
-    n = mask.sum(axis=1)
-    ok = n >= min_sensors
-    M = len(azimuth)
+    n, ok, meas, uv, mk = _seen_measurements(azimuth, elevation, min_sensors)
+    M = len(n)
     T_out = np.full((M, 2, 4, 4), np.nan)
     rms_out = np.full((M, 2), np.nan)
     facing = np.zeros((M, 2))
     if np.any(ok):
-        az, el, mk = azimuth[ok], elevation[ok], mask[ok]
-        meas = np.stack([np.nan_to_num(az), np.nan_to_num(el)], axis=-1)
-        uv = np.stack([np.tan(az), np.tan(el)], axis=-1)
         Ta, rms_a, Tb, rms_b = _twin_candidates(uv, meas, mk, positions, normals, model,
                                                 iterations, huber_rad)
         T = np.stack([Ta, Tb], axis=1)
@@ -291,19 +302,12 @@ def board_poses(
     ``outlier_floor_rad``) are dropped and the pose solved again; ``rms_rad`` is over the
     sensors kept.
     """
-    azimuth = np.asarray(azimuth, dtype=float)
-    elevation = np.asarray(elevation, dtype=float)
-    mask = np.isfinite(azimuth) & np.isfinite(elevation)
-    n = mask.sum(axis=1)
-    ok = n >= min_sensors
-    M = len(azimuth)
+    n, ok, meas, uv, mk = _seen_measurements(azimuth, elevation, min_sensors)
+    M = len(n)
     T_out = np.full((M, 4, 4), np.nan)
     rms_out = np.full(M, np.nan)
     if not np.any(ok):
         return PnPResult(T_out, rms_out, n)
-    az, el, mk = azimuth[ok], elevation[ok], mask[ok]
-    meas = np.stack([np.nan_to_num(az), np.nan_to_num(el)], axis=-1)
-    uv = np.stack([np.tan(az), np.tan(el)], axis=-1)
     used = mk
     for _ in range(2):  # the second round drops gross outliers (reflections)
         T, rms, worst = _solve_candidates(uv, meas, used, positions, normals, model,
