@@ -61,14 +61,15 @@ class Status(StrEnum):
 
 @dataclass(frozen=True)
 class LMParams:
-    """Iteration limit and the stopping rule's tolerances (see the module docstring)."""
+    """Iteration limit and the stopping rule's tolerances (see the module docstring); made
+    from the user's :class:`GraphOptions`, which hold the defaults."""
 
-    max_iterations: int = 60
-    relative_tolerance: float = 1e-5
-    step_tolerance_sigma: float = 0.05
-    board_step_tolerance_rad: float = 1e-3
-    board_step_tolerance_m: float = 1e-4
-    board_step_quantile: float = 1.0
+    max_iterations: int
+    relative_tolerance: float
+    step_tolerance_sigma: float
+    board_step_tolerance_rad: float
+    board_step_tolerance_m: float
+    board_step_quantile: float
 
     @classmethod
     def from_options(cls, options: GraphOptions) -> LMParams:

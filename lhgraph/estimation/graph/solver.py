@@ -41,7 +41,6 @@ from lhgraph.model.lh1 import StationModel
 
 Array = NDArray[np.float64]
 Progress = Callable[[str], None]
-SOLVERS = ("lm", "isam2")
 FEW_DIODES = 5
 """The default initialiser's PnP needs this many diodes with both angles per measurement."""
 FEW_DIODE_STEP_QUANTILE = 0.95
@@ -69,8 +68,6 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         raise SolverError(f"reference station {reference} has no hits")
     if len(stations) < 2:
         raise SolverError(f"only station(s) {stations} seen: need at least two")
-    if options.solver not in SOLVERS:
-        raise SolverError(f"unknown solver '{options.solver}' (expected lm or isam2)")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     few = few_diode(angles)
