@@ -36,7 +36,7 @@ import yaml
 from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
-from lhgraph.io.files import write_atomic
+from lhgraph.io.files import read_input, write_atomic
 from lhgraph.model.bitcraze import (
     calibration_from_bitcraze,
     calibration_to_bitcraze,
@@ -148,12 +148,9 @@ def _mapping(system_type: int, source: str | Path | None) -> CalibrationMapping:
 def read_system_config(path: str | Path) -> SystemConfig:
     """Read and validate a cfclient ``system-config.yaml``."""
     path = Path(path)
+    text = read_input(path, "a YAML file")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError("file not found", path) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a YAML file", path) from None
+        data = yaml.safe_load(text.decode("utf-8"))
     except UnicodeDecodeError:
         raise InputError("not a text file", path) from None
     except yaml.YAMLError as exc:

@@ -28,16 +28,23 @@ CSV_ENCODING = "utf-8-sig"
 skipped."""
 
 
-def read_toml(path: str | Path) -> dict[str, Any]:
-    """Parse a TOML file; missing or malformed files raise InputError."""
+def read_input(path: str | Path, expected: str) -> bytes:
+    """The bytes of the input file ``path``; a missing file or a directory raises InputError
+    naming it (``expected`` says what it should be, e.g. ``"a TOML file"``)."""
     path = Path(path)
     try:
-        with path.open("rb") as f:
-            return tomllib.load(f)
+        return path.read_bytes()
     except FileNotFoundError:
         raise InputError("file not found", path) from None
     except IsADirectoryError:
-        raise InputError("is a directory, expected a TOML file", path) from None
+        raise InputError(f"is a directory, expected {expected}", path) from None
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """Parse a TOML file; missing or malformed files raise InputError."""
+    data = read_input(path, "a TOML file")
+    try:
+        return tomllib.loads(data.decode("utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"not valid TOML ({exc})", path) from None
     except UnicodeDecodeError:

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lhgraph.errors import InputError
-from lhgraph.io.files import write_atomic
+from lhgraph.io.files import read_input, write_atomic
 from lhgraph.signal.pulses import LightPulses
 
 MAGIC = b"LHCP"
@@ -119,13 +119,7 @@ def read_capture(path: str | Path) -> tuple[Capture, list[str]]:
     prefix) are kept.
     """
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError("file not found", path) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a .lhcap file", path) from None
-    return decode_capture_bytes(data, path)
+    return decode_capture_bytes(read_input(path, "a .lhcap file"), path)
 
 
 def decode_capture_bytes(data: bytes, source: str | Path | None = None

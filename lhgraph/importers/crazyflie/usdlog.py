@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
-from lhgraph.io.files import write_atomic
+from lhgraph.io.files import read_input, write_atomic
 
 MAGIC = 0xBC
 TIMESTAMP_TYPE = {1: "<u4", 2: "<u8"}
@@ -134,12 +134,7 @@ def _scan(data: bytes, start: int, end: int, sizes: dict[int, int]
 def read_usd_log(path: str | Path) -> UsdLog:
     """Read a uSD event log (see module); InputError if the file is not one."""
     source = Path(path)
-    try:
-        data = source.read_bytes()
-    except FileNotFoundError:
-        raise InputError("file not found", source) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a uSD log", source) from None
+    data = read_input(source, "a uSD log")
     version, types, start = _read_header(data, source)
     by_id = {t.id: t for t in types}
     sizes = {t.id: t.dtype(version).itemsize for t in types}
