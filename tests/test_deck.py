@@ -15,7 +15,7 @@ from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp import board_poses, planar_twins
 from lhgraph.estimation.init.twins import resolve_twins
 from lhgraph.estimation.problem import build_problem
-from lhgraph.estimation.sweep_times import co_logged_fraction, retime_co_logged, rotor_grid
+from lhgraph.estimation.sweep_times import co_logged_fraction, retime_cycles, rotor_grid
 from lhgraph.geometry.transforms import inverse, make_pose, rotation_angle, so3_exp
 from lhgraph.model.boards import crazyflie_deck
 from lhgraph.model.lh1 import ideal_angles
@@ -56,8 +56,8 @@ def test_retime_recovers_hit_times(deck_capture):
     cap = deck_capture
     exact = simulate(replace(cap.config, logging=replace(cap.config.logging,
                                                          timestamps="hit")), seed=3).angles
-    retimed = retime_co_logged(cap.angles)
-    assert retimed is not None and len(retimed) == len(cap.angles)
+    retimed = retime_cycles(cap.angles)
+    assert len(retimed) == len(cap.angles)
     # the same hits (same decoded angles): retimed = exact hit time + the log's common delay
     # (angles repeat across sweeps at 24 MHz: the nearest hit of the same station and angle)
     truth: dict[tuple, list[float]] = {}
@@ -77,10 +77,27 @@ def test_retime_recovers_hit_times(deck_capture):
         cap.angles.extra["sweep"] * 4 + cap.angles.lighthouse))
 
 
-def test_hit_stamped_captures_not_retimed():
+def test_hit_stamped_captures_not_few_diode():
     cap = simulate(parse_simulation_config({"duration_s": 2.0}, "sim.toml"), seed=1)
-    assert retime_co_logged(cap.angles) is None
+    assert max(co_logged_fraction(cap.angles).values()) < 0.05
     assert not few_diode(cap.angles)
+
+
+def test_hit_timed_deck_gets_the_same_cycles(deck_capture):
+    # the deck's hits at their hit times (what lhgraph import crazyflie writes): the same
+    # rotor-grid times (but for the log's common delay) and board states as from the stamps
+    cap = deck_capture
+    from_stamps = retime_cycles(cap.angles)
+    # per-cycle scheduling jitter (0.3 ms) on the hit times, as the log's stamps carry
+    jitter = np.random.default_rng(4).normal(0, 3e-4, from_stamps.extra["sweep"].max() + 1)
+    t = from_stamps.time + jitter[from_stamps.extra["sweep"]]
+    order = np.argsort(t, kind="stable")
+    hit_timed = from_stamps.select(order)
+    hit_timed.time, hit_timed.extra = t[order], {}
+    again = retime_cycles(hit_timed)
+    assert max(co_logged_fraction(hit_timed).values()) < 0.05
+    assert len(np.unique(again.extra["sweep"])) == len(np.unique(from_stamps.extra["sweep"]))
+    assert np.percentile(np.abs(np.sort(again.time) - np.sort(from_stamps.time)), 99) < 1e-4
 
 
 def test_rotor_grid_removes_jitter_and_keeps_outliers():
@@ -142,7 +159,7 @@ def test_resolve_twins_follows_the_smooth_chain():
 
 def test_few_diode_initialiser_near_truth(deck_capture):
     cap = deck_capture
-    angles = retime_co_logged(cap.angles)
+    angles = retime_cycles(cap.angles)
     models = {i: cap.truth.stations[i].model for i in cap.truth.indices()}
     problem = build_problem(cap.board, angles, models, 0)
     init = FewDiodeInitialiser()(cap.board, angles, problem)

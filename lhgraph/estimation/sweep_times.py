@@ -1,14 +1,16 @@
-"""Sweep times of receivers that log a station's two sweeps together (the Crazyflie deck).
+"""Sweep times and one board state per rotor cycle for few-diode receivers (the Crazyflie deck).
 
 A decoder that times every hit (our board, libsurvive) stamps a station's azimuth and
 elevation sweeps of one rotor cycle one slot (T/2 = 8.333 ms) apart. The Crazyflie deck logs
 both sweeps of a cycle at the same moment, after its elevation (axis 1) sweep, one event per
 diode a few microseconds apart: the stamps say when the cycle was logged, not when each
 sweep passed. At 2 m/s, taking the azimuth sweep at its stamp misplaces the board by 17 mm.
-:func:`co_logged_fraction` recognises such stamps; :func:`retime_co_logged` puts every hit of
-a sweep at its sweep's stamp, the azimuth sweeps one slot earlier (the LH1 schedule sweeps
-axis 0, then axis 1, of one station in consecutive slots), and each hit at the moment the
-plane passed its angle (``angle T / 2 pi`` after the sweep's centre: up to 1.5 ms).
+:func:`co_logged_fraction` recognises such stamps. :func:`retime_cycles` puts every sweep of
+a few-diode capture at its sweep's time on the station's fitted rotor grid (co-logged: the
+stamp, the azimuth sweep one slot earlier, as the LH1 schedule sweeps axis 0, then axis 1, of
+one station in consecutive slots; hit-timed: from the hit times), each hit at the moment the
+plane passed its angle (``angle T / 2 pi`` after the sweep's centre: up to 1.5 ms), and gives
+both sweeps of a station's rotor cycle one board state.
 """
 
 from __future__ import annotations
@@ -83,36 +85,43 @@ def co_logged_fraction(angles: Angles) -> dict[int, float]:
     return out
 
 
-def retime_co_logged(angles: Angles, min_fraction: float = 0.5,
-                     slot_s: float = SLOT_S) -> Angles | None:
-    """``angles`` with the sweeps of every co-logged station (``co_logged_fraction`` above
-    ``min_fraction``) at their hit times: a hit at its cycle's stamp on the station's
-    fitted rotor grid (:func:`rotor_grid`: the log's scheduling jitter removed) plus
-    ``angle 2 slot_s / 2 pi`` (when the plane passed it), axis-0 sweeps ``slot_s`` earlier;
-    rows sorted by the new times (the common delay of the log stays: it shifts every state
-    alike). The extra column ``sweep`` becomes the board state of each hit: one per logged
-    cycle of a co-logged station (its two sweeps, 8.3 ms apart, share a state; the bearing
-    factor propagates each hit by its time offset with the state's twist), one per sweep
-    elsewhere. None when no station is
-    co-logged (the stamps are hit times: nothing to do)."""
-    fraction = co_logged_fraction(angles)
-    stations = [s for s, f in fraction.items() if f > min_fraction]
-    if not stations:
-        return None
+def retime_cycles(angles: Angles, slot_s: float = SLOT_S) -> Angles:
+    """``angles`` at the hit times of each station's fitted rotor grid, one board state per
+    rotor cycle: for few-diode receivers (the Crazyflie deck), whether their stamps are log
+    times (co-logged sweeps) or hit times.
+
+    Every sweep gets the moment its plane passed the station's axis: a co-logged station's
+    (``co_logged_fraction`` above one half) stamp of the cycle, one slot earlier for the
+    azimuth sweep; a hit-timed sweep's mean of ``time - angle 2 slot_s / 2 pi``. A station's
+    azimuth sweep and the elevation sweep one slot after it (within ``CO_LOGGED_S``) form a
+    cycle; the cycles' moments are put on the station's fitted rotor grid
+    (:func:`rotor_grid`: the receiver's scheduling jitter removed, a cycle the grid misses
+    keeps its value) and every hit at its sweep's grid moment + ``angle 2 slot_s / 2 pi``.
+    Rows come sorted by the new times; the extra column ``sweep`` becomes each hit's board
+    state: one per cycle of a station (its two sweeps, 8.3 ms apart, share it; the bearing
+    factor propagates each hit by its time offset with the state's twist). A common delay of
+    a log's stamps stays (it shifts every state alike)."""
+    co_logged = {s for s, f in co_logged_fraction(angles).items() if f > 0.5}
     ids, t, station, axis = _sweeps(angles)
-    sweep_time = np.full(len(t), np.nan)
-    state = np.arange(len(t))  # one board state per sweep, per cycle where co-logged
-    for s in stations:  # both sweeps of a cycle carry its stamp: one grid per station
+    count = np.maximum(np.bincount(ids, minlength=len(t)), 1)
+    passed = np.bincount(ids, weights=angles.time - angles.angle * slot_s / np.pi,
+                         minlength=len(t)) / count
+    logged = np.isin(station, list(co_logged))
+    # the moment of the cycle's elevation sweep that each sweep belongs to
+    cycle_moment = np.where(logged, t, passed + slot_s * (axis == 0))
+    sweep_time = np.empty(len(t))
+    state = np.empty(len(t), dtype=np.int64)
+    for s in np.unique(station).tolist():
         rows = np.flatnonzero(station == s)
-        rows = rows[np.argsort(t[rows], kind="stable")]
-        cycle = np.r_[True, np.diff(t[rows]) > CO_LOGGED_S]
+        rows = rows[np.argsort(cycle_moment[rows], kind="stable")]
+        m = cycle_moment[rows]
+        cycle = np.r_[True, np.diff(m) > CO_LOGGED_S]
         start = np.flatnonzero(cycle)
-        stamps = np.add.reduceat(t[rows], start) / np.diff(np.r_[start, len(rows)])
-        snapped = rotor_grid(stamps, 4 * slot_s)
+        moments = np.add.reduceat(m, start) / np.diff(np.r_[start, len(rows)])
+        snapped = rotor_grid(moments, 4 * slot_s)
         sweep_time[rows] = snapped[np.cumsum(cycle) - 1] - slot_s * (axis[rows] == 0)
         state[rows] = rows[start][np.cumsum(cycle) - 1]
-    hit_time = sweep_time[ids] + angles.angle * slot_s / np.pi
-    time = np.where(np.isnan(hit_time), angles.time, hit_time)
+    time = sweep_time[ids] + angles.angle * slot_s / np.pi
     order = np.argsort(time, kind="stable")
     retimed = Angles(time, angles.lighthouse, angles.axis, angles.sensor, angles.angle,
                      {**angles.extra, "sweep": state[ids]})

@@ -9,7 +9,8 @@ steps with a numpy cost instead of ``graph.error`` (no callback per factor).
 
 Each iteration linearises the graph, eliminates it multifrontally in the layout's order
 (:meth:`VariableLayout.elimination_ordering`: the stations in the root clique, so their
-marginal covariances come with the Bayes tree) and steps; a step that raises the error is
+marginal covariances come with the Bayes tree) and steps, each board state's step limited to
+``max_board_step_rad`` / ``_m`` (:func:`limit_board_steps`); a step that raises the error is
 retried with damping ``sqrt(lam) I`` on every variable (``lam`` x10 from 1e-6, up to 1e8).
 
 **Stopping rule.** After every accepted step the noise hook (if any) may change the noise
@@ -40,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.variables import BOARD_POSE, VariableLayout
+from lhgraph.estimation.graph.variables import BOARD_POSE, BOARD_TWIST, VariableLayout
 
 Array = NDArray[np.float64]
 Progress = Callable[[str], None]
@@ -70,12 +71,15 @@ class LMParams:
     board_step_tolerance_rad: float
     board_step_tolerance_m: float
     board_step_quantile: float
+    max_board_step_rad: float
+    max_board_step_m: float
 
     @classmethod
     def from_options(cls, options: GraphOptions) -> LMParams:
         return cls(options.max_iterations, options.relative_tolerance,
                    options.step_tolerance_sigma, options.board_step_tolerance_rad,
-                   options.board_step_tolerance_m, options.board_step_quantile or 1.0)
+                   options.board_step_tolerance_m, options.board_step_quantile or 1.0,
+                   options.max_board_step_rad, options.max_board_step_m)
 
 
 @dataclass(frozen=True)
@@ -145,6 +149,28 @@ def _damping(values: gtsam.Values, lam: float) -> gtsam.GaussianFactorGraph:
     return damp
 
 
+def limit_board_steps(delta: gtsam.VectorValues, layout: VariableLayout, max_rad: float,
+                      max_m: float) -> gtsam.VectorValues:
+    """``delta`` with every board state's step (pose and twist together) scaled down so that
+    its rotation is at most ``max_rad`` and its translation at most ``max_m``: a trust
+    region per state. A state far from its solution (a mirror pose, a few hits bridged by a
+    weak motion prior) otherwise takes a Gauss-Newton step that the linearisation does not
+    hold, the step fails, and the damping that rescues it slows every other variable."""
+    step = layout.read_steps(delta, BOARD_POSE)
+    excess = np.maximum(np.linalg.norm(step[:, :3], axis=1) / max_rad,
+                        np.linalg.norm(step[:, 3:], axis=1) / max_m)
+    big = np.flatnonzero(excess > 1.0)
+    if len(big) == 0:
+        return delta
+    scaled = gtsam.VectorValues()
+    for k in big.tolist():
+        for family in (BOARD_POSE, BOARD_TWIST):
+            key = family.key(k)
+            scaled.insert(key, delta.at(key) / excess[k])
+    delta.update(scaled)
+    return delta
+
+
 def _joined(a: gtsam.GaussianFactorGraph, b: gtsam.GaussianFactorGraph
             ) -> gtsam.GaussianFactorGraph:
     out = gtsam.GaussianFactorGraph()
@@ -172,7 +198,8 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
         while True:
             system = lin if lam == 0.0 else _joined(lin, _damping(values, lam))
             tree = system.eliminateMultifrontal(ordering)
-            delta = tree.optimize()
+            delta = limit_board_steps(tree.optimize(), layout, params.max_board_step_rad,
+                                      params.max_board_step_m)
             candidate = values.retract(delta)
             new_error = cost(candidate)
             if new_error <= error or lam > 1e8:

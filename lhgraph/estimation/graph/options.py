@@ -42,9 +42,13 @@ class GraphOptions:
     turns for dozens of iterations without moving the stations); ``few_diode_sigma_rad``: the
     floor of the angle noise on few-diode data instead of ``angle_sigma_rad`` (a real LH1
     station's noise, SPEC §3; with ~7 hits per state, the state's pose and offset absorb
-    much of the residual, so their spread underestimates the noise). Each field's allowed range
-    is declared next to it; a value outside it raises :class:`~lhgraph.errors.InputError`
-    naming the field.
+    much of the residual, so their spread underestimates the noise);
+    ``max_board_step_rad`` / ``max_board_step_m``: the largest rotation / translation step a
+    board state takes in one LM iteration (a trust region per state: a state far from its
+    solution, e.g. a mirror pose, turns this far per iteration instead of taking a step the
+    linearisation does not hold, which would fail and damp every variable). Each field's
+    allowed range is declared next to it; a value outside it raises
+    :class:`~lhgraph.errors.InputError` naming the field.
     """
 
     angle_sigma_rad: float = option(4e-5, gt=0)
@@ -70,6 +74,8 @@ class GraphOptions:
     sweep_times: str = option("auto", choices=SWEEP_TIMES)
     board_step_quantile: float | None = option(None, kind=float, gt=0, le=1)
     few_diode_sigma_rad: float = option(6.5e-5, gt=0)
+    max_board_step_rad: float = option(0.3, gt=0)
+    max_board_step_m: float = option(0.1, gt=0)
 
     def __post_init__(self) -> None:
         check_fields(self)

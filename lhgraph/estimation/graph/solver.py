@@ -32,7 +32,7 @@ from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
 from lhgraph.estimation.problem import GraphProblem, build_problem
 from lhgraph.estimation.result import Residuals, SolveResult
-from lhgraph.estimation.sweep_times import retime_co_logged
+from lhgraph.estimation.sweep_times import co_logged_fraction, retime_cycles
 from lhgraph.io.angles import Angles
 from lhgraph.io.stations import Station, Stations
 from lhgraph.io.trajectory import Trajectory
@@ -56,9 +56,10 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     index (factory calibration, rotor offsets). The world frame is the reference station's.
     ``initialiser`` gives the initial values (default: :class:`PnPKabschInitialiser`, or
     :class:`FewDiodeInitialiser` when the sweeps hold fewer than ``FEW_DIODES`` hits in the
-    median, too few for the default's per-measurement PnP). Sweeps of a receiver that logs a
-    station's two sweeps together are first put at their sweep times
-    (``options.sweep_times``, :func:`retime_co_logged`).
+    median, too few for the default's per-measurement PnP). The sweeps of few-diode data, or
+    of a receiver that logs a station's two sweeps together, are first put on each station's
+    rotor grid, one board state per rotor cycle (``options.sweep_times``,
+    :func:`retime_cycles`).
     """
     options = options or GraphOptions()
     models = models or {}
@@ -70,16 +71,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         raise SolverError(f"only station(s) {stations} seen: need at least two")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    few = few_diode(angles)
-    if options.sweep_times == "auto":
-        retimed = retime_co_logged(angles)
-        if retimed is not None:
-            angles = retimed
-            if progress:
-                progress("sweeps logged together: put at their sweep times")
-    if few:
-        options = replace(options, angle_sigma_rad=max(options.angle_sigma_rad,
-                                                       options.few_diode_sigma_rad))
+    angles, options, few = few_diode_preparation(angles, options, progress)
     params = LMParams.from_options(options)
     if options.board_step_quantile is None and few:
         params = replace(params, board_step_quantile=FEW_DIODE_STEP_QUANTILE)
@@ -112,9 +104,33 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     return _result(angles, problem, ev, fit, cov, options, timings, t0)
 
 
+def few_diode_preparation(angles: Angles, options: GraphOptions,
+                          progress: Progress | None = None
+                          ) -> tuple[Angles, GraphOptions, bool]:
+    """``angles``, ``options`` and whether the data is few-diode, made ready for the graph:
+    the sweeps of few-diode data, or of a receiver that logs a station's two sweeps together,
+    on each station's rotor grid with one board state per rotor cycle
+    (``options.sweep_times``, :func:`retime_cycles`), and on few-diode data the angle-noise
+    floor ``few_diode_sigma_rad``. Shared by the calibration and by tracking."""
+    few = few_diode(angles)
+    if options.sweep_times == "auto" and (few or co_logged(angles)):
+        angles = retime_cycles(angles)
+        if progress:
+            progress("few-diode sweeps: put on each station's rotor grid, one state per cycle")
+    if few:
+        options = replace(options, angle_sigma_rad=max(options.angle_sigma_rad,
+                                                       options.few_diode_sigma_rad))
+    return angles, options, few
+
+
 def few_diode(angles: Angles) -> bool:
     """Whether the median sweep of ``angles`` holds fewer than ``FEW_DIODES`` hits."""
     return bool(np.median(np.bincount(angles.sweep_ids())) < FEW_DIODES)
+
+
+def co_logged(angles: Angles) -> bool:
+    """Whether some station of ``angles`` logs its two sweeps of a cycle together."""
+    return max(co_logged_fraction(angles).values(), default=0.0) > 0.5
 
 
 def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: OptimizerResult,

@@ -211,7 +211,9 @@ class StreamingSolver:
                                 replace(self.options, reference=self.station_ids[0]))
             path = None
         else:
-            batch = track(self.board, data, self.stations, self.models, self.options)
+            # one state per sweep, as the smoother adds them (no rotor-grid cycles)
+            batch = track(self.board, data, self.stations, self.models,
+                          replace(self.options, sweep_times="stamped"))
             path = batch.path
         self._psd = (batch.diagnostics.get("accel_psd_rot", self._psd[0]),
                      batch.diagnostics.get("accel_psd_pos", self._psd[1]))

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
@@ -30,7 +30,9 @@ from lhgraph.estimation.graph.factors import build_graph
 from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import LMParams, OptimizerResult, levenberg_marquardt
 from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.solver import FEW_DIODE_STEP_QUANTILE, few_diode_preparation
 from lhgraph.estimation.graph.variables import BOARD_POSE, initial_values
+from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp import board_poses
 from lhgraph.estimation.init.pnp_kabsch import (
     Initialisation,
@@ -50,7 +52,7 @@ from lhgraph.model.lh1 import StationModel
 Array = NDArray[np.float64]
 Progress = Callable[[str], None]
 PNP_MIN_SENSORS = 5
-"""Sensors a PnP pose needs on both axes (fewer on a board with fewer: the deck's 4)."""
+"""Sensors a PnP pose needs on both axes (few-diode receivers start from planar twins)."""
 
 
 @dataclass(frozen=True)
@@ -121,22 +123,14 @@ def tracking_problem(board: Board, angles: Angles, stations: Stations,
     return build_problem(board, angles, merged, ids[0], ids), T_world_lh
 
 
-def mean_rotation(R: Array) -> Array:
-    """The chordal mean (3, 3) of rotations ``R`` (n, 3, 3)."""
-    U, _, Vt = np.linalg.svd(R.sum(axis=0))
-    return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-
-
 def initial_path(board: Board, angles: Angles, problem: GraphProblem, T_world_lh: Array,
                  pose_solver: PoseSolver | None = None, max_pnp_gap_s: float = 0.02
                  ) -> tuple[Initialisation, int]:
     """Initial board poses and twists at the problem's states, and how many PnP poses they
-    rest on: every station's PnP path in the known world, merged by time and interpolated
-    (on a board with fewer than :data:`PNP_MIN_SENSORS` diodes every state at the PnP poses'
-    mean rotation), then the position of each state more than ``max_pnp_gap_s`` from any
+    rest on: every station's PnP path in the known world, merged by time and interpolated,
+    then the position of each state more than ``max_pnp_gap_s`` from any
     PnP pose from the bearings around it (:func:`snapshot_poses`)."""
-    solver = pose_solver or partial(board_poses,
-                                    min_sensors=min(PNP_MIN_SENSORS, len(board.positions)))
+    solver = pose_solver or partial(board_poses, min_sensors=PNP_MIN_SENSORS)
     paths = station_paths(board, angles, problem, solver)
     n = sum(len(p[0]) for p in paths)
     if n == 0:
@@ -145,12 +139,6 @@ def initial_path(board: Board, angles: Angles, problem: GraphProblem, T_world_lh
                           "the path")
     t = problem.state_time
     X0, V0 = world_states(paths, T_world_lh, t)
-    if len(board.positions) < PNP_MIN_SENSORS:
-        # a 4-point pose's rotation is often its mirror twin, and interpolated across
-        # seconds it is a guess: start every state at the mean rotation (the bearings and
-        # the motion prior turn it)
-        X0[:, :3, :3] = mean_rotation(np.concatenate(
-            [T_world_lh[slot, :3, :3] @ p[1][:, :3, :3] for slot, p in enumerate(paths)]))
     # states without a PnP pose near them: position from the bearings around them
     t_pnp = np.sort(np.concatenate([p[0] for p in paths]))
     i = np.searchsorted(t_pnp, t)
@@ -230,20 +218,29 @@ def track(board: Board, angles: Angles, stations: Stations,
     """The board's path ``T_world_board`` (one state per sweep) with every station held at its
     ``T_world_lh`` in ``stations`` (the world is the stations file's). ``angles`` as measured
     (rad, before factory correction); ``models`` by station index (default: the stations
-    file's); ``pose_solver`` the per-measurement PnP (default: planar homography)."""
+    file's); ``pose_solver`` the per-measurement PnP of a many-diode board (default: planar
+    homography; few-diode data starts from :meth:`FewDiodeInitialiser.with_stations`)."""
     options = options or GraphOptions()
     t0 = time.perf_counter()
+    angles, options, few = few_diode_preparation(angles, options, progress)
     problem, T_world_lh = tracking_problem(board, angles, stations, models)
-    init, n_pnp = initial_path(board, angles, problem, T_world_lh, pose_solver)
+    if few:
+        init = FewDiodeInitialiser().with_stations(board, angles, problem, T_world_lh)
+        n_pnp = 0
+    else:
+        init, n_pnp = initial_path(board, angles, problem, T_world_lh, pose_solver)
     timings = {"initialise": time.perf_counter() - t0}
     if progress:
-        progress(f"initialised {problem.n_states} board states from {n_pnp} PnP poses")
+        progress(f"initialised {problem.n_states} board states"
+                 + (f" from {n_pnp} PnP poses" if n_pnp else " from planar twins"))
     graph, ev = build_graph(problem, options, T_world_lh)
     values = initial_values(ev.layout, init)
     hook = NoiseAdaptation(ev, options, progress) if NoiseAdaptation.enabled(options) else None
     try:
-        fit = levenberg_marquardt(graph, values, ev.cost, ev.layout,
-                                  LMParams.from_options(options), hook, progress)
+        params = LMParams.from_options(options)
+        if options.board_step_quantile is None and few:
+            params = replace(params, board_step_quantile=FEW_DIODE_STEP_QUANTILE)
+        fit = levenberg_marquardt(graph, values, ev.cost, ev.layout, params, hook, progress)
         sigma = position_sigmas(fit, problem.n_states)
     except RuntimeError as err:  # gtsam's IndeterminateLinearSystemException and kin
         raise SolverError("the linearised path cannot be solved: some board state is not "

@@ -163,21 +163,39 @@ class FewDiodeInitialiser:
     rms_floor_rad: float = 1e-4
 
     def __call__(self, board: Board, angles: Angles, problem: GraphProblem) -> Initialisation:
-        S = len(problem.station_ids)
-        # the stations in parallel threads (numpy releases the GIL in its array loops)
-        with ThreadPoolExecutor(max_workers=min(S, len(os.sched_getaffinity(0)))) as pool:
-            twins = list(pool.map(partial(twin_path, board, angles, problem), range(S)))
+        twins = self._twins(board, angles, problem)
         # pass 1: each station's twins by their own fit; stations joined on those paths
         paths = [chosen_path(tw, tw.emission, self.turn_sigma) for tw in twins]
         L0, overlap = join_paths(board, problem, self._floored(paths), self.max_gap_s)
         # pass 2: the twins that agree with the other stations' views
-        paths = [chosen_path(tw, tw.emission + cross_station_cost(
-            twins, L0, slot, self.cross_sigma_rad, self.max_gap_s), self.turn_sigma)
-            for slot, tw in enumerate(twins)]
+        paths = self._agreeing_paths(twins, L0)
         L0, overlap = join_paths(board, problem, self._floored(paths), self.max_gap_s)
-        paths = triangulated(paths, L0, self.max_gap_s)
-        X0, V0 = world_states(paths, L0, problem.state_time, self.velocity_span_s)
-        return Initialisation(L0, X0, V0, overlap)
+        return self._states(paths, L0, problem, overlap)
+
+    def with_stations(self, board: Board, angles: Angles, problem: GraphProblem,
+                      T_world_lh: Array) -> Initialisation:
+        """Board states with every station known at ``T_world_lh`` (S, 4, 4) by slot
+        (tracking): the twins that agree with the other stations' views, triangulated."""
+        twins = self._twins(board, angles, problem)
+        return self._states(self._agreeing_paths(twins, T_world_lh), T_world_lh, problem, [])
+
+    def _twins(self, board: Board, angles: Angles, problem: GraphProblem) -> list[TwinPath]:
+        S = len(problem.station_ids)
+        # the stations in parallel threads (numpy releases the GIL in its array loops)
+        with ThreadPoolExecutor(max_workers=min(S, len(os.sched_getaffinity(0)))) as pool:
+            return list(pool.map(partial(twin_path, board, angles, problem), range(S)))
+
+    def _agreeing_paths(self, twins: list[TwinPath], T_world_lh: Array
+                        ) -> list[tuple[Array, Array, Array]]:
+        return [chosen_path(tw, tw.emission + cross_station_cost(
+            twins, T_world_lh, slot, self.cross_sigma_rad, self.max_gap_s), self.turn_sigma)
+            for slot, tw in enumerate(twins)]
+
+    def _states(self, paths: list[tuple[Array, Array, Array]], T_world_lh: Array,
+                problem: GraphProblem, overlap: list[int]) -> Initialisation:
+        paths = triangulated(paths, T_world_lh, self.max_gap_s)
+        X0, V0 = world_states(paths, T_world_lh, problem.state_time, self.velocity_span_s)
+        return Initialisation(T_world_lh, X0, V0, overlap)
 
     def _floored(self, paths: list[tuple[Array, Array, Array]]
                  ) -> list[tuple[Array, Array, Array]]:
