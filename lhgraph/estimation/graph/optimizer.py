@@ -9,9 +9,10 @@ steps with a numpy cost instead of ``graph.error`` (no callback per factor).
 
 Each iteration linearises the graph, eliminates it multifrontally in the layout's order
 (:meth:`VariableLayout.elimination_ordering`: the stations in the root clique, so their
-marginal covariances come with the Bayes tree) and steps, each board state's step limited to
-``max_board_step_rad`` / ``_m`` (:func:`limit_board_steps`); a step that raises the error is
-retried with damping ``sqrt(lam) I`` on every variable (``lam`` x10 from 1e-6, up to 1e8).
+marginal covariances come with the Bayes tree) and steps; a step that raises the error is
+retried with each board state's step limited to ``max_board_step_rad`` / ``_m``
+(:func:`limit_board_steps`), then with damping ``sqrt(lam) I`` on every variable (``lam``
+x10 from 1e-6, up to 1e8).
 
 **Stopping rule.** After every accepted step the noise hook (if any) may change the noise
 levels; the solve has *converged* at an iteration that left the levels as they were and
@@ -198,10 +199,17 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
         while True:
             system = lin if lam == 0.0 else _joined(lin, _damping(values, lam))
             tree = system.eliminateMultifrontal(ordering)
-            delta = limit_board_steps(tree.optimize(), layout, params.max_board_step_rad,
-                                      params.max_board_step_m)
-            candidate = values.retract(delta)
-            new_error = cost(candidate)
+            delta = tree.optimize()
+            # the full step first; if it fails, the same step within each board state's
+            # trust region; if that fails too, damping
+            for limited in (False, True):
+                if limited:
+                    delta = limit_board_steps(delta, layout, params.max_board_step_rad,
+                                              params.max_board_step_m)
+                candidate = values.retract(delta)
+                new_error = cost(candidate)
+                if new_error <= error:
+                    break
             if new_error <= error or lam > 1e8:
                 break
             lam = max(lam * 10.0, 1e-6)

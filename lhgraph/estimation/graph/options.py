@@ -43,10 +43,11 @@ class GraphOptions:
     floor of the angle noise on few-diode data instead of ``angle_sigma_rad`` (a real LH1
     station's noise, SPEC §3; with ~7 hits per state, the state's pose and offset absorb
     much of the residual, so their spread underestimates the noise);
-    ``max_board_step_rad`` / ``max_board_step_m``: the largest rotation / translation step a
-    board state takes in one LM iteration (a trust region per state: a state far from its
-    solution, e.g. a mirror pose, turns this far per iteration instead of taking a step the
-    linearisation does not hold, which would fail and damp every variable). Each field's
+    ``max_board_step_rad`` / ``max_board_step_m``: when an LM step raises the error, it is
+    tried again with each board state's rotation / translation step scaled down to these
+    (a trust region per state: a state far from its solution, e.g. a mirror pose, turns this
+    far instead of taking a step the linearisation does not hold) before the damping that
+    slows every variable. Each field's
     allowed range is declared next to it; a value outside it raises
     :class:`~lhgraph.errors.InputError` naming the field.
     """
