@@ -37,8 +37,9 @@ from lhgraph.errors import LhgraphError
 from lhgraph.estimation.baseline import solve_paper
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
-from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser, consistent_path
+from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
 from lhgraph.estimation.init.pnp_nonplanar import tracker_board_poses
+from lhgraph.estimation.init.twins import consistent_path
 from lhgraph.estimation.metrics import station_errors
 from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.estimation.result import SolveResult

@@ -31,7 +31,8 @@ from lhgraph.estimation.graph.variables import (
     VariableLayout,
     initial_values,
 )
-from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser, consistent_path
+from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
+from lhgraph.estimation.init.twins import consistent_path
 from lhgraph.estimation.metrics import station_errors
 from lhgraph.estimation.problem import build_problem
 from lhgraph.geometry.transforms import inverse, make_pose, se3_exp, se3_log, so3_exp

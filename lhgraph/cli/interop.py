@@ -17,6 +17,9 @@ def _add_import_hive(sub: argparse._SubParsersAction) -> None:
                        "board.toml, ootx.toml, imu.csv and mocap.csv in the output directory.")
     p.add_argument("bag", help="hive .bag file (ROS1)")
     p.add_argument("--output", "-o", required=True, help="directory to write the files into")
+    p.add_argument("--keep-sync-offsets", action="store_true",
+                   help="write the angles as hive gives them, without raising the sweeps "
+                   "that read one sync-bit length low (docs/hive.md)")
     add_common_output(p)
     p.set_defaults(_import=_run_import_hive)
 
@@ -24,7 +27,8 @@ def _add_import_hive(sub: argparse._SubParsersAction) -> None:
 def _run_import_hive(args: argparse.Namespace) -> int:
     from lhgraph.importers.hive import import_hive
 
-    result = import_hive(args.bag, args.output, overwrite=args.force)
+    result = import_hive(args.bag, args.output, overwrite=args.force,
+                         sync_bits=not args.keep_sync_offsets)
     if not args.quiet:
         print(result.summary())
     return 0

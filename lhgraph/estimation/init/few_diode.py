@@ -21,76 +21,24 @@ from functools import partial
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.estimation.init.pnp import planar_twins
-from lhgraph.estimation.init.pnp_kabsch import (
-    Initialisation,
-    consistent_path,
-    join_paths,
-    world_states,
-)
-from lhgraph.estimation.init.twins import resolve_twins
+from lhgraph.errors import SolverError
+from lhgraph.estimation.init.pnp_kabsch import Initialisation, join_paths, world_states
+from lhgraph.estimation.init.twins import TwinPath, chosen_path, twin_path
 from lhgraph.estimation.problem import GraphProblem
-from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.geometry.transforms import inverse, rotation_angle
 from lhgraph.io.angles import Angles
 from lhgraph.model.board import Board
 
 Array = NDArray[np.float64]
 
-MIN_SENSORS = 4
-"""A planar pose needs four points (a homography)."""
-
-
-@dataclass(frozen=True)
-class TwinPath:
-    """One station's measurements with both planar twins: ``time`` (M,) s, ``T_lh_board``
-    (M, 2, 4, 4), ``rms_rad`` (M, 2), ``emission`` (M, 2) each twin's own cost (chi-square
-    of its fit; inf: impossible)."""
-
-    time: Array
-    T_lh_board: Array
-    rms_rad: Array
-    emission: Array
-
-
-def twin_path(board: Board, angles: Angles, problem: GraphProblem, slot: int,
-              fit_sigma_rad: float = 1e-4) -> TwinPath:
-    """Station slot's interpolated measurements and both planar twins of each (at least
-    ``MIN_SENSORS`` diodes); emission = the twin's chi-square at ``fit_sigma_rad``, a twin
-    whose diodes face away is impossible."""
-    s = problem.station_ids[slot]
-    station = angles.select(angles.lighthouse == s)
-    if len(station) == 0:
-        return TwinPath(np.empty(0), np.empty((0, 2, 4, 4)), np.empty((0, 2)),
-                        np.empty((0, 2)))
-    meas = reconstruct_measurements(station, board, "full")
-    twins = planar_twins(meas.azimuth, meas.elevation, board.positions, board.normals,
-                         problem.models[slot], min_sensors=MIN_SENSORS)
-    chi2 = 2 * twins.n_sensors[:, None] * (twins.rms_rad / fit_sigma_rad) ** 2
-    emission = np.where((twins.facing > 0.5) & np.isfinite(chi2), chi2, np.inf)
-    valid = np.isfinite(emission).any(axis=1)
-    return TwinPath(meas.time[valid], twins.T_lh_board[valid], twins.rms_rad[valid],
-                    emission[valid])
-
-
-def chosen_path(twins: TwinPath, emission: Array, turn_sigma: float
-                ) -> tuple[Array, Array, Array]:
-    """The path ``(times, T_lh_board, rms_rad)`` of the Viterbi twins under ``emission``,
-    filtered like the default initialiser's paths (:func:`consistent_path`)."""
-    choice = resolve_twins(twins.time, twins.T_lh_board[..., :3, :3], emission, turn_sigma)
-    rows = np.flatnonzero(choice >= 0)
-    T = twins.T_lh_board[rows, choice[rows]]
-    rms = twins.rms_rad[rows, choice[rows]]
-    keep = consistent_path(twins.time[rows], T)
-    return twins.time[rows][keep], T[keep], rms[keep]
-
-
 def cross_station_cost(twins: list[TwinPath], T_world_lh: Array, slot: int,
-                       sigma_rad: float, max_gap_s: float) -> Array:
-    """(M, 2) cost of each twin of ``slot`` against the other stations: the squared angle
-    (in ``sigma_rad``) to the nearest twin, in the world, of the other stations' measurement
-    closest in time (within ``max_gap_s``; else 0). Mirror twins are mirrored about each
-    station's own line of sight, so only the true orientation is common to two stations."""
+                       sigma_rad: float, max_gap_s: float, turn_sigma: float = 0.0) -> Array:
+    """(M, 2) cost of each twin of ``slot`` against the other stations: the squared angle to
+    the nearest twin, in the world, of the other stations' measurement closest in time
+    (within ``max_gap_s``; else 0), in units of ``sigma_rad`` widened by the board's turning
+    over the time between them (variance ``sigma_rad^2 + turn_sigma^2 dt``, the Viterbi's
+    random walk). Mirror twins are mirrored about each station's own line of sight, so only
+    the true orientation is common to two stations."""
     own = twins[slot]
     R_own = T_world_lh[slot, :3, :3] @ own.T_lh_board[..., :3, :3]  # (M, 2, 3, 3)
     best = np.full((len(own.time), 2), np.inf)
@@ -98,15 +46,17 @@ def cross_station_cost(twins: list[TwinPath], T_world_lh: Array, slot: int,
         if other == slot or len(twins[other].time) == 0:
             continue
         o = twins[other]
-        i = np.clip(np.searchsorted(o.time, own.time), 1, max(len(o.time) - 1, 1))
-        i = np.where(np.abs(o.time[i - 1] - own.time) < np.abs(o.time[i] - own.time), i - 1, i)
-        near = np.abs(o.time[i] - own.time) < max_gap_s
+        j = np.searchsorted(o.time, own.time)
+        lo, hi = np.clip(j - 1, 0, len(o.time) - 1), np.clip(j, 0, len(o.time) - 1)
+        i = np.where(np.abs(o.time[lo] - own.time) <= np.abs(o.time[hi] - own.time), lo, hi)
+        dt = np.abs(o.time[i] - own.time)
         R_o = T_world_lh[other, :3, :3] @ o.T_lh_board[i][..., :3, :3]  # (M, 2, 3, 3)
         rel = np.swapaxes(R_own[:, :, None], -1, -2) @ R_o[:, None, :]  # (M, 2, 2, 3, 3)
         angle = np.nanmin(np.where(np.isfinite(rel).all(axis=(-1, -2)),
                                    rotation_angle(np.nan_to_num(rel)), np.inf), axis=2)
-        best = np.where(near[:, None], np.minimum(best, angle), best)
-    return np.where(np.isfinite(best), (best / sigma_rad) ** 2, 0.0)
+        z2 = angle**2 / (sigma_rad**2 + turn_sigma**2 * dt)[:, None]
+        best = np.where((dt < max_gap_s)[:, None], np.minimum(best, z2), best)
+    return np.where(np.isfinite(best), best, 0.0)
 
 
 def triangulated(paths: list[tuple[Array, Array, Array]], T_world_lh: Array,
@@ -151,7 +101,10 @@ def triangulated(paths: list[tuple[Array, Array, Array]], T_world_lh: Array,
 class FewDiodeInitialiser:
     """The :class:`~lhgraph.estimation.init.Initialiser` for few-diode boards (see the module
     docstring). ``turn_sigma`` (rad/sqrt(s)) is the Viterbi's random walk; ``cross_sigma_rad``
-    the spread of two stations' views of one orientation (the second pass); ``max_gap_s``
+    the spread of two stations' views of one orientation (the second pass), compared over
+    at most ``cross_max_gap_s`` (widened by the turning over the time between the views:
+    :func:`cross_station_cost`; tracking, with the stations known, compares over 0.5 s,
+    which bridges the sparse stretches of a deck log); ``max_gap_s``
     and ``velocity_span_s`` as in the default initialiser; the paths' rms is floored at
     ``rms_floor_rad`` for the Kabsch weights (4 points leave only 2 redundant equations, so a
     fit's own rms says little)."""
@@ -160,6 +113,7 @@ class FewDiodeInitialiser:
     velocity_span_s: float = 0.01
     turn_sigma: float = 0.3
     cross_sigma_rad: float = 0.15
+    cross_max_gap_s: float = 0.05
     rms_floor_rad: float = 1e-4
 
     def __call__(self, board: Board, angles: Angles, problem: GraphProblem) -> Initialisation:
@@ -188,11 +142,15 @@ class FewDiodeInitialiser:
     def _agreeing_paths(self, twins: list[TwinPath], T_world_lh: Array
                         ) -> list[tuple[Array, Array, Array]]:
         return [chosen_path(tw, tw.emission + cross_station_cost(
-            twins, T_world_lh, slot, self.cross_sigma_rad, self.max_gap_s), self.turn_sigma)
+            twins, T_world_lh, slot, self.cross_sigma_rad, self.cross_max_gap_s,
+            self.turn_sigma), self.turn_sigma)
             for slot, tw in enumerate(twins)]
 
     def _states(self, paths: list[tuple[Array, Array, Array]], T_world_lh: Array,
                 problem: GraphProblem, overlap: list[int]) -> Initialisation:
+        if not any(len(p[0]) for p in paths):
+            raise SolverError("no station saw 4 diodes of the board on both axes within a "
+                              "sweep or two: no planar pose to start from")
         paths = triangulated(paths, T_world_lh, self.max_gap_s)
         X0, V0 = world_states(paths, T_world_lh, problem.state_time, self.velocity_span_s)
         return Initialisation(T_world_lh, X0, V0, overlap)

@@ -178,9 +178,9 @@ def facing_fraction(T_lh_board: Array, positions: Array, normals: Array,
 def _twin_candidates(
     uv: Array, meas: Array, mask: NDArray[np.bool_], positions: Array, normals: Array,
     model: StationModel, iterations: int, huber_rad: float,
-) -> tuple[Array, Array, Array, Array]:
-    """Homography pose and its planar mirror, each refined ``iterations`` times: poses and rms
-    of twin a, then of twin b."""
+) -> tuple[tuple[Array, Array, Array], tuple[Array, Array, Array]]:
+    """Homography pose and its planar mirror, each refined ``iterations`` times: (poses, rms,
+    each sensor's residual) of twin a, then of twin b (:func:`_refine`)."""
     c, B = _seen_planes(positions, normals, mask)
     plane_xy = np.einsum("msi,mij->msj", positions[None] - c[:, None], B[..., :2])
     T_cam_plane = _homography_poses(uv, mask, plane_xy)
@@ -201,9 +201,8 @@ def _twin_candidates(
     T1 = T0.copy()
     T1[:, :3, :3] = R_rot @ T0[:, :3, :3]
     T1[:, :3, 3] = c_lh - (T1[:, :3, :3] @ c[..., None])[..., 0]
-    Ta, rms_a, _ = _refine(T0, meas, mask, positions, model, iterations, huber_rad)
-    Tb, rms_b, _ = _refine(T1, meas, mask, positions, model, iterations, huber_rad)
-    return Ta, rms_a, Tb, rms_b
+    return (_refine(T0, meas, mask, positions, model, iterations, huber_rad),
+            _refine(T1, meas, mask, positions, model, iterations, huber_rad))
 
 
 def _solve_candidates(
@@ -213,8 +212,8 @@ def _solve_candidates(
     """Homography pose and its planar mirror, both refined; the better one per measurement."""
     # both twins get a few iterations, only the better one the rest
     first = min(iterations, _CANDIDATE_ITERATIONS)
-    Ta, rms_a, Tb, rms_b = _twin_candidates(uv, meas, mask, positions, normals, model, first,
-                                            huber_rad)
+    (Ta, rms_a, _), (Tb, rms_b, _) = _twin_candidates(uv, meas, mask, positions, normals,
+                                                      model, first, huber_rad)
     # a seen sensor must face the station: that rejects the wrong twin on curved boards
     face_a = facing_fraction(Ta, positions, normals, mask) > 0.8
     face_b = facing_fraction(Tb, positions, normals, mask) > 0.8
@@ -244,8 +243,9 @@ def _seen_measurements(azimuth: Array, elevation: Array, min_sensors: int
 @dataclass(frozen=True)
 class PlanarTwins:
     """Both solutions of the planar mirror ambiguity per measurement: ``T_lh_board``
-    (M, 2, 4, 4), ``rms_rad`` (M, 2) (NaN: no pose), ``facing`` (M, 2) the fraction of seen
-    sensors facing the station, ``n_sensors`` (M,) sensors seen on both axes."""
+    (M, 2, 4, 4), ``rms_rad`` (M, 2) (NaN: no pose), ``facing`` (M, 2) the fraction of
+    sensors kept facing the station, ``n_sensors`` (M,) sensors kept (seen on both axes, less
+    the outliers dropped)."""
 
     T_lh_board: Array
     rms_rad: Array
@@ -255,31 +255,47 @@ class PlanarTwins:
 
 def planar_twins(azimuth: Array, elevation: Array, positions: Array, normals: Array,
                  model: StationModel = IDEAL, iterations: int = 15, min_sensors: int = 4,
-                 huber_rad: float = 1e-3) -> PlanarTwins:
+                 huber_rad: float = 1e-3, outlier_factor: float = 5.0,
+                 outlier_floor_rad: float = 3e-3) -> PlanarTwins:
     """Both mirror twins of every measurement's planar pose, each refined on the full model.
 
     Angles ``(M, S)`` (rad, NaN = not seen) of sensors ``positions``/``normals`` (S, 3),
     board frame. With few sensors (a 4-diode deck far away) the twins fit about equally
     well, so the choice is left to the caller (:func:`~lhgraph.estimation.init.twins.
-    resolve_twins` picks the temporally consistent one). Measurements with fewer than
-    ``min_sensors`` sensors on both axes, or a twin behind the station, get NaN.
+    resolve_twins` picks the temporally consistent one). Sensors whose residual under the
+    better twin exceeds ``outlier_factor`` times the measurement's median (and
+    ``outlier_floor_rad``: a reflection) are dropped and both twins solved again, as in
+    :func:`board_poses`, while ``min_sensors`` remain; ``rms_rad`` and ``n_sensors`` are
+    over the sensors kept. Measurements with fewer than ``min_sensors`` sensors on both
+    axes, or a twin behind the station, get NaN.
     """
     n, ok, meas, uv, mk = _seen_measurements(azimuth, elevation, min_sensors)
     M = len(n)
     T_out = np.full((M, 2, 4, 4), np.nan)
     rms_out = np.full((M, 2), np.nan)
     facing = np.zeros((M, 2))
+    n_out = n.copy()
     if np.any(ok):
-        Ta, rms_a, Tb, rms_b = _twin_candidates(uv, meas, mk, positions, normals, model,
-                                                iterations, huber_rad)
+        used = mk
+        for _ in range(2):  # the second round drops gross outliers (reflections)
+            (Ta, rms_a, worst_a), (Tb, rms_b, worst_b) = _twin_candidates(
+                uv, meas, used, positions, normals, model, iterations, huber_rad)
+            worst = np.where((rms_b < rms_a)[:, None], worst_b, worst_a)
+            typical = np.nanmedian(np.where(used, worst, np.nan), axis=1, keepdims=True)
+            inlier = mk & (worst < np.maximum(outlier_factor * typical, outlier_floor_rad))
+            kept = np.where((inlier.sum(axis=1) >= min_sensors)[:, None], inlier, mk)
+            if np.array_equal(kept, used):
+                break
+            used = kept
         T = np.stack([Ta, Tb], axis=1)
         rms = np.stack([rms_a, rms_b], axis=1)
         front = T[:, :, 0, 3] > 0
         T_out[ok] = np.where(front[..., None, None], T, np.nan)
         rms_out[ok] = np.where(front, rms, np.nan)
-        facing[ok] = np.stack([facing_fraction(Ta, positions, normals, mk),
-                               facing_fraction(Tb, positions, normals, mk)], axis=1)
-    return PlanarTwins(T_out, rms_out, facing, n)
+        facing[ok] = np.stack([facing_fraction(Ta, positions, normals, used),
+                               facing_fraction(Tb, positions, normals, used)], axis=1)
+        n_out[ok] = used.sum(axis=1)
+    return PlanarTwins(T_out, rms_out, facing, n_out)
 
 
 def board_poses(

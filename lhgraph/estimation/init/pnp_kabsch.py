@@ -13,7 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
-from lhgraph.estimation.init.pnp import PnPResult, board_poses
+from lhgraph.estimation.init.pnp import PnPResult
+from lhgraph.estimation.init.twins import chosen_path, consistent_path, twin_path
 from lhgraph.estimation.problem import GraphProblem
 from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.geometry.kabsch import weighted_kabsch
@@ -52,38 +53,28 @@ def _station_path(board: Board, angles: Angles, problem: GraphProblem, pose_solv
     return meas.time[ok], pnp.T_lh_board[ok], pnp.rms_rad[ok]
 
 
+def _twin_chain_path(board: Board, angles: Angles, problem: GraphProblem, turn_sigma: float,
+                     slot: int) -> tuple[Array, Array, Array]:
+    """Station slot's (times, T_lh_board, rms): both planar twins of every merged az/el pair
+    with 5 sensors, the temporally consistent chain of them (a seen sensor faces the
+    station: on a curved board that rules the wrong twin out)."""
+    twins = twin_path(board, angles, problem, slot, "merge", min_sensors=5, min_facing=0.8)
+    return chosen_path(twins, twins.emission, turn_sigma)
+
+
 def station_paths(board: Board, angles: Angles, problem: GraphProblem,
-                  pose_solver: PoseSolver) -> list[tuple[Array, Array, Array]]:
-    """Every station slot's path ``(times, T_lh_board, rms)``, the stations in parallel
-    threads (numpy releases the GIL in its array loops)."""
+                  pose_solver: PoseSolver | None = None, turn_sigma: float = 1.0
+                  ) -> list[tuple[Array, Array, Array]]:
+    """Every station slot's path ``(times, T_lh_board, rms)``: by default both planar twins of
+    each measurement and the chain the Viterbi picks (random walk ``turn_sigma``
+    rad/sqrt(s): :func:`~lhgraph.estimation.init.twins.resolve_twins`); with
+    ``pose_solver`` its pose per measurement. The stations in parallel threads (numpy
+    releases the GIL in its array loops)."""
     slots = range(len(problem.station_ids))
+    one = (partial(_twin_chain_path, board, angles, problem, turn_sigma) if pose_solver is None
+           else partial(_station_path, board, angles, problem, pose_solver))
     with ThreadPoolExecutor(max_workers=min(len(slots), len(os.sched_getaffinity(0)))) as pool:
-        return list(pool.map(partial(_station_path, board, angles, problem, pose_solver), slots))
-
-
-def consistent_path(t: Array, T: Array, window: int = 7, max_jump_m: float = 0.15,
-                     max_turn_rad: float = 0.5) -> NDArray[np.bool_]:
-    """Poses within ``max_jump_m`` of the running median position of their ``window``
-    neighbours and within ``max_turn_rad`` of the rotation of most of them (a board moves
-    < 2 m/s and turns < 10 rad/s; a wrong PnP twin is turned, and a fit to a handful of
-    reflected hits lands far away)."""
-    if len(t) < window:
-        return np.ones(len(t), dtype=bool)
-    half = window // 2
-    p = T[:, :3, 3]
-    padded = np.pad(p, ((half, half), (0, 0)), mode="edge")
-    windows = np.lib.stride_tricks.sliding_window_view(padded, window, axis=0)
-    near = np.linalg.norm(p - np.median(windows, axis=-1), axis=1) < max_jump_m
-    R = T[:, :3, :3]
-    agree = np.zeros(len(t), dtype=int)
-    for shift in range(1, half + 1):
-        # relative rotation angle to the neighbour ``shift`` steps later: cos = (tr - 1) / 2
-        cos = (np.einsum("kij,kij->k", R[:-shift], R[shift:]) - 1.0) / 2.0
-        close = cos > np.cos(max_turn_rad)
-        agree[:-shift] += close
-        agree[shift:] += close
-    neighbours = np.minimum(np.arange(len(t)), half) + np.minimum(np.arange(len(t))[::-1], half)
-    return near & (2 * agree >= neighbours)
+        return list(pool.map(one, slots))
 
 
 def _match_times(t_query: Array, t_ref: Array, max_gap_s: float) -> NDArray[np.bool_]:
@@ -98,10 +89,10 @@ def _match_times(t_query: Array, t_ref: Array, max_gap_s: float) -> NDArray[np.b
 
 def initialise(board: Board, angles: Angles, problem: GraphProblem,
                max_gap_s: float = 0.05, velocity_span_s: float = 0.01,
-               pose_solver: PoseSolver = board_poses) -> Initialisation:
-    """Initial values from per-station PnP paths (``pose_solver`` per measurement) and a
-    weighted Kabsch on sensor points; twists from the merged path's change over
-    ``velocity_span_s``."""
+               pose_solver: PoseSolver | None = None) -> Initialisation:
+    """Initial values from per-station PnP paths (:func:`station_paths`: the Viterbi's chain
+    of planar twins, or ``pose_solver`` per measurement) and a weighted Kabsch on sensor
+    points; twists from the merged path's change over ``velocity_span_s``."""
     paths = station_paths(board, angles, problem, pose_solver)
     L0, overlap = join_paths(board, problem, paths, max_gap_s)
     X0, V0 = world_states(paths, L0, problem.state_time, velocity_span_s)
@@ -163,11 +154,13 @@ def world_states(paths: list[tuple[Array, Array, Array]], T_world_lh: Array, t: 
 
 @dataclass(frozen=True)
 class PnPKabschInitialiser:
-    """The default :class:`~lhgraph.estimation.init.Initialiser`: :func:`initialise` with
-    ``pose_solver`` for the per-measurement board poses (planar homography PnP by default;
-    :func:`lhgraph.estimation.init.pnp_nonplanar.tracker_board_poses` suits curved boards)."""
+    """The default :class:`~lhgraph.estimation.init.Initialiser`: :func:`initialise`, the
+    board poses by default both planar twins of every measurement and the temporally
+    consistent chain of them; with ``pose_solver`` its pose per measurement
+    (:func:`lhgraph.estimation.init.pnp.board_poses`: the better-fitting twin each time;
+    :func:`lhgraph.estimation.init.pnp_nonplanar.tracker_board_poses` for curved boards)."""
 
-    pose_solver: PoseSolver = board_poses
+    pose_solver: PoseSolver | None = None
     max_gap_s: float = 0.05
     velocity_span_s: float = 0.01
 

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from lhgraph.errors import InputError
 from lhgraph.importers.hive.bag import MAX_ABS_ANGLE_RAD, read_hive_bag
 from lhgraph.importers.hive.conventions import hive_angles, station_calibrations
+from lhgraph.importers.hive.sync_offsets import SyncBitCorrection, correct_sync_bits
 from lhgraph.io.angles import save_angles
 from lhgraph.io.files import check_writable, write_csv_columns
 from lhgraph.model.board import save_board
@@ -41,6 +42,7 @@ class HiveImport:
     mocap_rate_hz: float = 0.0
     off_grid_sweeps: dict[int, int] = field(default_factory=dict)
     n_off_grid_hits: int = 0
+    sync_bits: SyncBitCorrection | None = None
 
     def summary(self) -> str:
         """Human-readable lines."""
@@ -57,6 +59,8 @@ class HiveImport:
                 f"lh{lh}/ax{ax} {r:.1f}" for (lh, ax), r in sorted(self.sweep_rate_hz.items())),
             f"imu: {self.imu_rate_hz:.1f} Hz; mocap: {self.mocap_rate_hz:.1f} Hz",
         ]
+        lines += ([self.sync_bits.summary()] if self.sync_bits is not None
+                  else ["sync-bit offsets: not corrected (--keep-sync-offsets)"])
         lines += [f"wrote {p}" for p in self.paths.values()]
         return "\n".join(lines)
 
@@ -66,10 +70,12 @@ def _rate_hz(t: Array) -> float:
     return float((len(t) - 1) / (t[-1] - t[0])) if len(t) > 1 else 0.0
 
 
-def import_hive(bag_path: str | Path, out_dir: str | Path, overwrite: bool = False
-                ) -> HiveImport:
+def import_hive(bag_path: str | Path, out_dir: str | Path, overwrite: bool = False,
+                sync_bits: bool = True) -> HiveImport:
     """Convert a hive bag into ``angles.csv``, ``board.toml``, ``ootx.toml``, ``imu.csv`` and
-    ``mocap.csv`` in ``out_dir`` (refuses to replace existing files unless ``overwrite``)."""
+    ``mocap.csv`` in ``out_dir`` (refuses to replace existing files unless ``overwrite``);
+    ``sync_bits``: find and raise the sweeps that read one sync-bit length low
+    (:mod:`lhgraph.importers.hive.sync_offsets`)."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError("exists and is not a directory", out)
@@ -78,6 +84,9 @@ def import_hive(bag_path: str | Path, out_dir: str | Path, overwrite: bool = Fal
     for p in paths.values():
         check_writable(p, overwrite)
     angles = hive_angles(bag)
+    correction = None
+    if sync_bits:
+        angles, correction = correct_sync_bits(angles)
     save_angles(angles, paths["angles"], overwrite)
     save_board(bag.board, paths["board"], overwrite)
     save_calibration(station_calibrations(bag), paths["ootx"], overwrite)
@@ -104,5 +113,5 @@ def import_hive(bag_path: str | Path, out_dir: str | Path, overwrite: bool = Fal
         n_sensors=len(bag.board.ids), off_grid_sweeps=bag.off_grid_sweeps,
         n_off_grid_hits=bag.n_off_grid_hits, duration_s=float(t_all.max() - t_all.min()),
         sweep_rate_hz=rates, imu_rate_hz=_rate_hz(bag.imu_time),
-        mocap_rate_hz=_rate_hz(bag.mocap_time),
+        mocap_rate_hz=_rate_hz(bag.mocap_time), sync_bits=correction,
     )
