@@ -45,7 +45,7 @@ def main() -> int:
     args = parser.parse_args()
     out = check_writable(args.output, args.force)
     with tempfile.TemporaryDirectory() as tmp:
-        import_hive(args.bag, tmp)
+        import_hive(args.bag, tmp, sync_bits=False)  # the angles as hive recorded them
         angles = load_angles(Path(tmp) / "angles.csv")
     expected = 2 * np.pi * ROTOR_HZ * DATA_BIT_S
     rest_end = motion_start(angles) - 0.5  # half a second of margin before the motion
