@@ -16,15 +16,19 @@ command -v arm-none-eabi-gcc > /dev/null || need+=(gcc-arm-none-eabi)
 [ -d /usr/lib/arm-none-eabi/newlib ] || need+=(libnewlib-arm-none-eabi)
 # clang for the fuzz smoke: its sanitizer/fuzzer runtime is a separate package on Debian
 command -v clang > /dev/null || need+=(clang)
-if command -v clang > /dev/null && ! echo 'int main(void){return 0;}' \
-        | clang -x c -fsanitize=address -o /dev/null - > /dev/null 2>&1; then
-    need+=("libclang-rt-$(clang -dumpversion | cut -d. -f1)-dev")
-fi
-if [ "${#need[@]}" -gt 0 ]; then
-    echo "firmware/ci.sh: installing ${need[*]}"
+apt_install() {
+    echo "firmware/ci.sh: installing $*"
     export DEBIAN_FRONTEND=noninteractive
     apt-get update -qq
-    apt-get install -y -qq --no-install-recommends "${need[@]}" > /dev/null
+    apt-get install -y -qq --no-install-recommends "$@" > /dev/null
+}
+if [ "${#need[@]}" -gt 0 ]; then
+    apt_install "${need[@]}"
+fi
+# checked once clang is there (a fresh machine gets clang above without its runtime)
+if ! echo 'int LLVMFuzzerTestOneInput(const char *d, long n){return 0;}' \
+        | clang -x c -fsanitize=fuzzer,address -o /dev/null - > /dev/null 2>&1; then
+    apt_install "libclang-rt-$(clang -dumpversion | cut -d. -f1)-dev"
 fi
 
 echo "== host build (build/firmware-host)"
