@@ -18,6 +18,7 @@ from lhgraph.estimation.graph.optimizer import (
     Status,
     largest_board_step,
     levenberg_marquardt,
+    limit_board_steps,
     remaining_sigmas,
 )
 from lhgraph.estimation.graph.options import GraphOptions
@@ -336,3 +337,25 @@ def test_elimination_ordering_follows_the_families():
                for i in (0, 7, 2**40))
     with pytest.raises(ValueError, match="same state indices"):
         VariableLayout({BOARD_POSE: range(3), BOARD_TWIST: range(2)})
+
+
+def test_limit_board_steps_scales_only_the_states_beyond_the_trust_region():
+    layout = VariableLayout.of_problem(3, 2)
+    steps = {0: np.r_[0.1, 0, 0, 0.01, 0, 0],  # within both limits
+             1: np.r_[0, 0.6, 0, 0.02, 0, 0],  # twice the rotation limit
+             2: np.r_[0, 0, 0.1, 0, 0.4, 0]}  # four times the translation limit
+    delta = gtsam.VectorValues()
+    for k, step in steps.items():
+        delta.insert(BOARD_POSE.key(k), step)
+        delta.insert(BOARD_TWIST.key(k), np.full(6, 1.0 + k))
+        delta.insert(SWEEP_OFFSET.key(k), np.array([1e-3]))
+    delta.insert(STATION_POSE.key(1), np.full(6, 0.5))
+    out = limit_board_steps(delta, layout, max_rad=0.3, max_m=0.1)
+    np.testing.assert_array_equal(out.at(BOARD_POSE.key(0)), steps[0])
+    np.testing.assert_allclose(out.at(BOARD_POSE.key(1)), steps[1] / 2)
+    np.testing.assert_allclose(out.at(BOARD_TWIST.key(1)), np.full(6, 2.0) / 2)
+    np.testing.assert_allclose(out.at(BOARD_POSE.key(2)), steps[2] / 4)
+    np.testing.assert_allclose(out.at(BOARD_TWIST.key(2)), np.full(6, 3.0) / 4)
+    # the stations and the sweep offsets are not board states: left alone
+    np.testing.assert_array_equal(out.at(STATION_POSE.key(1)), np.full(6, 0.5))
+    np.testing.assert_array_equal(out.at(SWEEP_OFFSET.key(2)), [1e-3])
