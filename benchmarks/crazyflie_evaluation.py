@@ -13,7 +13,10 @@ percentiles of the position error after the best rigid fit.
 
 (a) ``--track NAME=T.csv``: a trajectory CSV (``lhgraph track`` output with the same
 stations TOML, its ``ootx.toml`` and ``crazyflie_deck``) evaluated the same way (positions
-only). Tracking takes minutes, so it is run beforehand and passed in, e.g.
+only), over every pose and again over the poses at moments (b) could use (every station
+seen within ``--max-gap`` on both sides: where one station alone sees the deck, the
+tracking error dominates whatever the geometry). Tracking takes minutes, so it is run
+beforehand and passed in, e.g.
 
     lhgraph track --stations DIR/stations-cfclient.toml --angles DIR/angles.csv \
         --board crazyflie_deck --calibration DIR/ootx.toml --output DIR/track-cfclient.csv
@@ -108,6 +111,18 @@ def crossing_beam_positions(angles: Angles, stations: Stations, max_gap_s: float
     return moments[ok], P[ok]
 
 
+def seen_by_all(angles: Angles, t: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """Whether every station has a hit within ``max_gap_s`` before and after each of ``t``
+    (the moments measure (b) can use)."""
+    ok = np.ones(len(t), dtype=bool)
+    for s in angles.stations():
+        ts = np.unique(angles.time[angles.lighthouse == s])
+        i = np.clip(np.searchsorted(ts, t), 1, len(ts) - 1)
+        ok &= (t >= ts[0]) & (t <= ts[-1]) & (t - ts[i - 1] <= max_gap_s) \
+            & (ts[i] - t <= max_gap_s)
+    return ok
+
+
 def _mocap_at(t_m: np.ndarray, p_m: np.ndarray, t: np.ndarray, max_gap_s: float = 0.02
               ) -> np.ndarray:
     i = np.clip(np.searchsorted(t_m, t), 1, len(t_m) - 1)
@@ -192,10 +207,16 @@ def main() -> None:
     if args.track:
         lines += ["| track | poses | " + " | ".join(f"p{p}" for p in PERCENTILES)
                   + " | rms | offsets |", "|---" * (len(PERCENTILES) + 4) + "|"]
-        for name, path in (s.split("=", 1) for s in args.track):
-            tr = load_trajectory(path)
+        tracks = [(name, load_trajectory(path)) for name, path in
+                  (s.split("=", 1) for s in args.track)]
+        for name, tr in tracks:
             e, d0, d1 = aligned_errors(tr.time, tr.T_world_board[:, :3, 3], t_m, p_m)
             lines.append(row(name, e, d0, d1, len(e)))
+        for name, tr in tracks:  # the poses at moments (b) could use: both stations seen
+            sel = seen_by_all(angles, tr.time, args.max_gap)
+            e, d0, d1 = aligned_errors(tr.time[sel], tr.T_world_board[sel, :3, 3], t_m, p_m)
+            lines.append(row(f"{name}, both stations within {args.max_gap * 1e3:.0f} ms", e,
+                             d0, d1, len(e)))
     else:
         lines.append("Not measured: no `--track` trajectory given.")
     lines += ["", f"Run time: {time.perf_counter() - start:.1f} s.", ""]
