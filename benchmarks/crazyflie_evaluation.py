@@ -117,6 +117,8 @@ def seen_by_all(angles: Angles, t: np.ndarray, max_gap_s: float) -> np.ndarray:
     ok = np.ones(len(t), dtype=bool)
     for s in angles.stations():
         ts = np.unique(angles.time[angles.lighthouse == s])
+        if len(ts) < 2:
+            return np.zeros(len(t), dtype=bool)
         i = np.clip(np.searchsorted(ts, t), 1, len(ts) - 1)
         ok &= (t >= ts[0]) & (t <= ts[-1]) & (t - ts[i - 1] <= max_gap_s) \
             & (ts[i] - t <= max_gap_s)

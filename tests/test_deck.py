@@ -186,3 +186,23 @@ def test_deck_seen_by_one_station_is_refused(deck_capture):
     models = {i: cap.truth.stations[i].model for i in cap.truth.indices()}
     with pytest.raises(SolverError, match="need at least two"):
         solve_graph(cap.board, one, models)
+
+
+def test_cross_station_cost_with_one_measurement_of_the_other_station():
+    # the other station's path has a single measurement: every twin is compared with it
+    from lhgraph.estimation.init.few_diode import cross_station_cost
+    from lhgraph.estimation.init.twins import TwinPath
+
+    R = so3_exp(np.array([[0.2, -0.1, 0.3]]))[0]  # the board at rest
+    T = np.repeat(np.eye(4)[None, None], 3, axis=0).repeat(2, axis=1)
+    T[:, 0, :3, :3] = R
+    T[:, 1, :3, :3] = R @ so3_exp(np.array([[0.0, 1.0, 0.0]]))[0]  # its mirror for station 0
+    T_other = T[1:2].copy()  # station 1's mirror is another one (its own line of sight)
+    T_other[0, 1, :3, :3] = R @ so3_exp(np.array([[1.0, 0.0, 0.0]]))[0]
+    own = TwinPath(np.array([0.0, 0.1, 0.2]), T, np.zeros((3, 2)), np.zeros((3, 2)))
+    other = TwinPath(np.array([0.1]), T_other, np.zeros((1, 2)), np.zeros((1, 2)))
+    L = np.repeat(np.eye(4)[None], 2, axis=0)
+    cost = cross_station_cost([own, other], L, 0, sigma_rad=0.15, max_gap_s=0.5)
+    assert cost.shape == (3, 2)
+    assert np.all(cost[:, 0] < 1e-12)  # the true orientation is common to both stations
+    assert np.all(cost[:, 1] > 30)  # the mirror twins are 1 rad apart: (1 / 0.15)^2 = 44

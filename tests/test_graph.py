@@ -350,7 +350,8 @@ def test_limit_board_steps_scales_only_the_states_beyond_the_trust_region():
         delta.insert(BOARD_TWIST.key(k), np.full(6, 1.0 + k))
         delta.insert(SWEEP_OFFSET.key(k), np.array([1e-3]))
     delta.insert(STATION_POSE.key(1), np.full(6, 0.5))
-    out = limit_board_steps(delta, layout, max_rad=0.3, max_m=0.1)
+    assert limit_board_steps(delta, layout, max_rad=0.3, max_m=0.1)
+    out = delta  # scaled in place
     np.testing.assert_array_equal(out.at(BOARD_POSE.key(0)), steps[0])
     np.testing.assert_allclose(out.at(BOARD_POSE.key(1)), steps[1] / 2)
     np.testing.assert_allclose(out.at(BOARD_TWIST.key(1)), np.full(6, 2.0) / 2)
@@ -359,3 +360,6 @@ def test_limit_board_steps_scales_only_the_states_beyond_the_trust_region():
     # the stations and the sweep offsets are not board states: left alone
     np.testing.assert_array_equal(out.at(STATION_POSE.key(1)), np.full(6, 0.5))
     np.testing.assert_array_equal(out.at(SWEEP_OFFSET.key(2)), [1e-3])
+    # nothing beyond the limits any more: nothing scaled, said so
+    assert not limit_board_steps(delta, layout, max_rad=0.3, max_m=0.1)
+    np.testing.assert_allclose(delta.at(BOARD_POSE.key(1)), steps[1] / 2)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lhgraph.estimation.init.pnp import board_poses
+from lhgraph.estimation.init.pnp import board_poses, planar_twins
 from lhgraph.geometry.transforms import se3_exp
 from lhgraph.model.boards import paper_board, pyramid_board
 from lhgraph.model.lh1 import ideal_angles
@@ -47,6 +47,21 @@ def test_reflections_are_dropped():
     err = np.linalg.norm(r.T_lh_board[:, :3, 3] - T[:, :3, 3], axis=1)
     assert np.nanmedian(err) < 3e-3
     assert np.nanpercentile(err, 90) < 2e-2
+
+
+def test_planar_twins_drop_reflections():
+    # the twins are refitted without the reflected sensors, and say how many they kept
+    board = paper_board()
+    T, az, el = _views(board, reflections=0.1, seed=2)
+    seen = np.isfinite(az) & np.isfinite(el)
+    tw = planar_twins(az, el, board.positions, board.normals, min_sensors=5)
+    ok = np.isfinite(tw.rms_rad).all(axis=1)
+    assert ok.mean() > 0.9
+    assert np.mean(tw.n_sensors[ok] < seen.sum(axis=1)[ok]) > 0.5  # most views lose some
+    best = np.nanmin(tw.rms_rad[ok], axis=1)
+    assert np.median(best) < 1e-4  # the kept sensors fit at the noise level
+    err = np.linalg.norm(tw.T_lh_board[ok, 0, :3, 3] - T[ok, :3, 3], axis=1)
+    assert np.median(err) < 3e-3
 
 
 def test_too_few_sensors_give_nan():

@@ -151,25 +151,26 @@ def _damping(values: gtsam.Values, lam: float) -> gtsam.GaussianFactorGraph:
 
 
 def limit_board_steps(delta: gtsam.VectorValues, layout: VariableLayout, max_rad: float,
-                      max_m: float) -> gtsam.VectorValues:
-    """``delta`` with every board state's step (pose and twist together) scaled down so that
-    its rotation is at most ``max_rad`` and its translation at most ``max_m``: a trust
+                      max_m: float) -> bool:
+    """Scale down, in place in ``delta``, every board state's step (pose and twist together)
+    whose rotation exceeds ``max_rad`` or translation ``max_m`` to those limits: a trust
     region per state. A state far from its solution (a mirror pose, a few hits bridged by a
     weak motion prior) otherwise takes a Gauss-Newton step that the linearisation does not
-    hold, the step fails, and the damping that rescues it slows every other variable."""
+    hold, the step fails, and the damping that rescues it slows every other variable.
+    Returns whether any step was scaled."""
     step = layout.read_steps(delta, BOARD_POSE)
     excess = np.maximum(np.linalg.norm(step[:, :3], axis=1) / max_rad,
                         np.linalg.norm(step[:, 3:], axis=1) / max_m)
     big = np.flatnonzero(excess > 1.0)
     if len(big) == 0:
-        return delta
+        return False
     scaled = gtsam.VectorValues()
-    for k in big.tolist():
-        for family in (BOARD_POSE, BOARD_TWIST):
-            key = family.key(k)
-            scaled.insert(key, delta.at(key) / excess[k])
+    for family in (BOARD_POSE, BOARD_TWIST):
+        keys = layout.keys(family)
+        for i in big.tolist():
+            scaled.insert(keys[i], delta.at(keys[i]) / excess[i])
     delta.update(scaled)
-    return delta
+    return True
 
 
 def _joined(a: gtsam.GaussianFactorGraph, b: gtsam.GaussianFactorGraph
@@ -203,9 +204,9 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
             # the full step first; if it fails, the same step within each board state's
             # trust region; if that fails too, damping
             for limited in (False, True):
-                if limited:
-                    delta = limit_board_steps(delta, layout, params.max_board_step_rad,
-                                              params.max_board_step_m)
+                if limited and not limit_board_steps(delta, layout, params.max_board_step_rad,
+                                                     params.max_board_step_m):
+                    break  # no state beyond its trust region: the same step failed
                 candidate = values.retract(delta)
                 new_error = cost(candidate)
                 if new_error <= error:

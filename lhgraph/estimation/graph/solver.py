@@ -116,7 +116,7 @@ def few_diode_preparation(angles: Angles, options: GraphOptions,
     if options.sweep_times == "auto" and (few or co_logged(angles)):
         angles = retime_cycles(angles)
         if progress:
-            progress("few-diode sweeps: put on each station's rotor grid, one state per cycle")
+            progress("sweeps put on each station's rotor grid, one board state per cycle")
     if few:
         options = replace(options, angle_sigma_rad=max(options.angle_sigma_rad,
                                                        options.few_diode_sigma_rad))

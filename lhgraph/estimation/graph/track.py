@@ -7,9 +7,10 @@ no station variable; Levenberg-Marquardt and the noise adaptation as in
 :func:`lhgraph.estimation.graph.solver.solve_graph`. Initial values: each station's PnP path
 (:func:`lhgraph.estimation.init.pnp_kabsch.station_paths`) put into the world by the known
 ``T_world_lh`` and merged by time (:func:`~lhgraph.estimation.init.pnp_kabsch.world_states`).
-A receiver with few diodes (the Crazyflie deck: 4, of which a sweep holds ~3) has a PnP pose
-only where one azimuth/elevation pair saw every diode; the states between are interpolated
-(and the ends held), and the graph, bearings and motion prior, does the rest. Each state's
+Few-diode data (the Crazyflie deck: 4 diodes, of which a sweep holds ~3) is prepared as for
+the calibration (:func:`~lhgraph.estimation.graph.solver.few_diode_preparation`: one state
+per station rotor cycle) and starts from the planar twins with the stations known
+(:meth:`~lhgraph.estimation.init.few_diode.FewDiodeInitialiser.with_stations`). Each state's
 position standard deviation ``sigma_m`` (from the marginal covariance) says how well its
 sweep and its neighbours determine it: where the receiver went unseen for long, the path is
 the motion prior's bridge and ``sigma_m`` grows.
@@ -63,9 +64,10 @@ PNP_MIN_SENSORS = 5
 @dataclass(frozen=True)
 class TrackedPath:
     """Board states of a tracked path: ``trajectory`` (``T_world_board``, one state per sweep,
-    in the stations' world) and per state the sweeping station's index ``lighthouse``, the
-    diodes it hit ``hits`` and the position standard deviation ``sigma_m`` (m, the largest
-    axis of the marginal position covariance)."""
+    per station rotor cycle on few-diode data, in the stations' world) and per state the
+    sweeping station's index ``lighthouse``, the diodes it hit ``hits`` and the position
+    standard deviation ``sigma_m`` (m, the largest axis of the marginal position
+    covariance)."""
 
     trajectory: Trajectory
     lighthouse: NDArray[np.int64]
@@ -95,7 +97,8 @@ def path_of(problem: GraphProblem, T_world_board: Array, sigma_m: Array) -> Trac
 
 @dataclass(frozen=True)
 class TrackResult:
-    """A batch track: the ``path``; ``initialised`` = PnP poses the start was made of; the
+    """A batch track: the ``path``; ``initialised`` = PnP poses the start was made of (0 for
+    few-diode data, which starts from planar twins); the
     optimiser's status and iterations; timings (s); the learned noise levels."""
 
     path: TrackedPath
@@ -220,7 +223,8 @@ def track(board: Board, angles: Angles, stations: Stations,
           models: dict[int, StationModel] | None = None, options: GraphOptions | None = None,
           pose_solver: PoseSolver | None = None, progress: Progress | None = None
           ) -> TrackResult:
-    """The board's path ``T_world_board`` (one state per sweep) with every station held at its
+    """The board's path ``T_world_board`` (one state per sweep; per station rotor cycle on
+    few-diode data) with every station held at its
     ``T_world_lh`` in ``stations`` (the world is the stations file's). ``angles`` as measured
     (rad, before factory correction); ``models`` by station index (default: the stations
     file's); ``pose_solver`` the per-measurement PnP of a many-diode board (default: planar

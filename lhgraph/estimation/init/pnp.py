@@ -278,8 +278,9 @@ def planar_twins(azimuth: Array, elevation: Array, positions: Array, normals: Ar
     if np.any(ok):
         used = mk
         for _ in range(2):  # the second round drops gross outliers (reflections)
+            solved = used  # the sensors the poses below are fitted to
             (Ta, rms_a, worst_a), (Tb, rms_b, worst_b) = _twin_candidates(
-                uv, meas, used, positions, normals, model, iterations, huber_rad)
+                uv, meas, solved, positions, normals, model, iterations, huber_rad)
             worst = np.where((rms_b < rms_a)[:, None], worst_b, worst_a)
             typical = np.nanmedian(np.where(used, worst, np.nan), axis=1, keepdims=True)
             inlier = mk & (worst < np.maximum(outlier_factor * typical, outlier_floor_rad))
@@ -292,9 +293,9 @@ def planar_twins(azimuth: Array, elevation: Array, positions: Array, normals: Ar
         front = T[:, :, 0, 3] > 0
         T_out[ok] = np.where(front[..., None, None], T, np.nan)
         rms_out[ok] = np.where(front, rms, np.nan)
-        facing[ok] = np.stack([facing_fraction(Ta, positions, normals, used),
-                               facing_fraction(Tb, positions, normals, used)], axis=1)
-        n_out[ok] = used.sum(axis=1)
+        facing[ok] = np.stack([facing_fraction(Ta, positions, normals, solved),
+                               facing_fraction(Tb, positions, normals, solved)], axis=1)
+        n_out[ok] = solved.sum(axis=1)
     return PlanarTwins(T_out, rms_out, facing, n_out)
 
 

@@ -60,7 +60,7 @@ class HiveImport:
             f"imu: {self.imu_rate_hz:.1f} Hz; mocap: {self.mocap_rate_hz:.1f} Hz",
         ]
         lines += ([self.sync_bits.summary()] if self.sync_bits is not None
-                  else ["sync-bit offsets: not corrected (--keep-sync-offsets)"])
+                  else ["sync-bit offsets: not looked for (the angles as recorded)"])
         lines += [f"wrote {p}" for p in self.paths.values()]
         return "\n".join(lines)
 

@@ -4,7 +4,8 @@ On part of a station's sweeps hive reads every diode one OOTX data-bit flash len
 data bit lengthens the sync flash by 2 x 10.42 us (SPEC section 2), 7.85 mrad of rotor angle
 at 60 rev/s, and hive evidently times such sweeps from a point of the flash that moves with
 its length (docs/hive.md, ``benchmarks/hive_sync_offsets.py``). The offset is common to all
-diodes of a sweep and comes in runs of a few sweeps.
+diodes of a sweep and comes in runs of a few sweeps. (A diode hit twice in one sweep counts
+with its last hit.)
 
 :func:`sync_bit_levels` labels each sweep of one station and axis *high* or *low* by a
 Viterbi over the sweeps in time order: a diode's angle moves smoothly from sweep to sweep,
@@ -33,7 +34,7 @@ from lhgraph.io.angles import Angles
 Array = NDArray[np.float64]
 
 DATA_BIT_RAD = 2 * np.pi * 60.0 * 2 * 10.42e-6
-"""The OOTX data bit's length in rotor angle: 2 x 10.42 us at 60 rev/s (7.86 mrad)."""
+"""The OOTX data bit's length in rotor angle: 2 x 10.42 us at 60 rev/s (7.857 mrad)."""
 
 
 @dataclass(frozen=True)
@@ -53,20 +54,28 @@ class SyncBitLevels:
 @dataclass(frozen=True)
 class SyncBitCorrection:
     """What :func:`correct_sync_bits` found per (station, axis): the levels, and whether the
-    low sweeps were raised (``corrected``)."""
+    low sweeps were raised (``corrected``; not where the fitted gap is off the data bit's
+    length by ``max_gap_error`` or more, relative)."""
 
     levels: dict[tuple[int, int], SyncBitLevels]
     corrected: dict[tuple[int, int], bool]
+    max_gap_error: float = 0.1
 
     def summary(self) -> str:
         """One line per station and axis."""
         lines = []
         for (lh, ax), lev in sorted(self.levels.items()):
             n = int(lev.low.sum())
-            what = (f"{n} of {len(lev.low)} sweeps ({lev.fraction_low:.0%}) read "
-                    f"{lev.gap_rad * 1e3:.3f} mrad low: raised" if self.corrected[(lh, ax)]
-                    else f"no sync-bit offset ({n} of {len(lev.low)} sweeps look low, too "
-                    "few: left as they are)")
+            found = (f"{n} of {len(lev.low)} sweeps ({lev.fraction_low:.0%}) read "
+                     f"{lev.gap_rad * 1e3:.3f} mrad low")
+            if self.corrected[(lh, ax)]:
+                what = f"{found}: raised"
+            elif abs(lev.gap_rad / DATA_BIT_RAD - 1) >= self.max_gap_error and n:
+                what = (f"{found}, not the data bit's {DATA_BIT_RAD * 1e3:.3f} mrad: left as "
+                        "they are")
+            else:
+                what = (f"no sync-bit offset ({n} of {len(lev.low)} sweeps look low, too "
+                        "few: left as they are)")
             lines.append(f"sync-bit offset lh{lh}/ax{ax}: {what}")
         return "\n".join(lines)
 
@@ -146,10 +155,13 @@ def sync_bit_levels(time: Array, sweep: NDArray[np.int64], sensor: NDArray[np.in
     return SyncBitLevels(low, fitted, int(np.isfinite(bend).sum()))
 
 
-def correct_sync_bits(angles: Angles, min_fraction: float = 0.05
+def correct_sync_bits(angles: Angles, min_fraction: float = 0.05, max_gap_error: float = 0.1
                       ) -> tuple[Angles, SyncBitCorrection]:
     """``angles`` with every low sweep of a station and axis raised by its fitted gap where
-    at least ``min_fraction`` of that series' sweeps are low, and what was found."""
+    at least ``min_fraction`` of that series' sweeps are low and the fitted gap is within
+    ``max_gap_error`` (relative) of the data bit's length (otherwise the labels are not a
+    sync-bit offset: the series is left as it is and the summary says why), and what was
+    found."""
     ids = angles.sweep_ids()
     out = angles.angle.copy()
     levels: dict[tuple[int, int], SyncBitLevels] = {}
@@ -169,9 +181,10 @@ def correct_sync_bits(angles: Angles, min_fraction: float = 0.05
             lev = sync_bit_levels(angles.time[rows], sweep, angles.sensor[rows],
                                   angles.angle[rows])
             levels[(lh, ax)] = lev
-            corrected[(lh, ax)] = lev.fraction_low >= min_fraction
+            corrected[(lh, ax)] = (lev.fraction_low >= min_fraction
+                                   and abs(lev.gap_rad / DATA_BIT_RAD - 1) < max_gap_error)
             if corrected[(lh, ax)]:
                 out[rows] += lev.gap_rad * lev.low[sweep]
     fixed = Angles(angles.time, angles.lighthouse, angles.axis, angles.sensor, out,
                    dict(angles.extra))
-    return fixed, SyncBitCorrection(levels, corrected)
+    return fixed, SyncBitCorrection(levels, corrected, max_gap_error)
