@@ -34,7 +34,7 @@ from lhgraph.io.angles import Angles
 Array = NDArray[np.float64]
 
 DATA_BIT_RAD = 2 * np.pi * 60.0 * 2 * 10.42e-6
-"""The OOTX data bit's length in rotor angle: 2 x 10.42 us at 60 rev/s (7.857 mrad)."""
+"""The OOTX data bit's length in rotor angle: 2 x 10.42 us at 60 rev/s (7.856 mrad)."""
 
 
 @dataclass(frozen=True)
