@@ -85,13 +85,20 @@ def co_logged_fraction(angles: Angles) -> dict[int, float]:
     return out
 
 
-def retime_cycles(angles: Angles, slot_s: float = SLOT_S) -> Angles:
+def co_logged_stations(angles: Angles, min_fraction: float = 0.5) -> set[int]:
+    """Stations of ``angles`` that log their two sweeps of a cycle together:
+    :func:`co_logged_fraction` above ``min_fraction``."""
+    return {s for s, f in co_logged_fraction(angles).items() if f > min_fraction}
+
+
+def retime_cycles(angles: Angles, co_logged: set[int] | None = None,
+                  slot_s: float = SLOT_S) -> Angles:
     """``angles`` at the hit times of each station's fitted rotor grid, one board state per
     rotor cycle: for few-diode receivers (the Crazyflie deck), whether their stamps are log
     times (co-logged sweeps) or hit times.
 
     Every sweep gets the moment its plane passed the station's axis: a co-logged station's
-    (``co_logged_fraction`` above one half) stamp of the cycle, one slot earlier for the
+    (``co_logged``, default :func:`co_logged_stations`) stamp of the cycle, one slot earlier for the
     azimuth sweep; a hit-timed sweep's mean of ``time - angle 2 slot_s / 2 pi``. A station's
     azimuth sweep and the elevation sweep one slot after it (within ``CO_LOGGED_S``) form a
     cycle; the cycles' moments are put on the station's fitted rotor grid
@@ -101,7 +108,8 @@ def retime_cycles(angles: Angles, slot_s: float = SLOT_S) -> Angles:
     state: one per cycle of a station (its two sweeps, 8.3 ms apart, share it; the bearing
     factor propagates each hit by its time offset with the state's twist). A common delay of
     a log's stamps stays (it shifts every state alike)."""
-    co_logged = {s for s, f in co_logged_fraction(angles).items() if f > 0.5}
+    if co_logged is None:
+        co_logged = co_logged_stations(angles)
     ids, t, station, axis = _sweeps(angles)
     count = np.maximum(np.bincount(ids, minlength=len(t)), 1)
     passed = np.bincount(ids, weights=angles.time - angles.angle * slot_s / np.pi,

@@ -32,7 +32,7 @@ from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
 from lhgraph.estimation.problem import GraphProblem, build_problem
 from lhgraph.estimation.result import Residuals, SolveResult
-from lhgraph.estimation.sweep_times import co_logged_fraction, retime_cycles
+from lhgraph.estimation.sweep_times import co_logged_stations, retime_cycles
 from lhgraph.io.angles import Angles
 from lhgraph.io.stations import Station, Stations
 from lhgraph.io.trajectory import Trajectory
@@ -73,8 +73,6 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     t0 = time.perf_counter()
     angles, options, few = few_diode_preparation(angles, options, progress)
     params = LMParams.from_options(options)
-    if options.board_step_quantile is None and few:
-        params = replace(params, board_step_quantile=FEW_DIODE_STEP_QUANTILE)
     problem = build_problem(board, angles, models, reference)
     if initialiser is None:
         initialiser = FewDiodeInitialiser() if few else PnPKabschInitialiser()
@@ -111,26 +109,25 @@ def few_diode_preparation(angles: Angles, options: GraphOptions,
     the sweeps of few-diode data, or of a receiver that logs a station's two sweeps together,
     on each station's rotor grid with one board state per rotor cycle
     (``options.sweep_times``, :func:`retime_cycles`), and on few-diode data the angle-noise
-    floor ``few_diode_sigma_rad``. Shared by the calibration and by tracking."""
+    floor ``few_diode_sigma_rad`` and, unless set, the stopping rule's board-step quantile
+    ``FEW_DIODE_STEP_QUANTILE``. Shared by the calibration and by tracking."""
     few = few_diode(angles)
-    if options.sweep_times == "auto" and (few or co_logged(angles)):
-        angles = retime_cycles(angles)
+    logged = co_logged_stations(angles)
+    if options.sweep_times == "auto" and (few or logged):
+        angles = retime_cycles(angles, logged)
         if progress:
             progress("sweeps put on each station's rotor grid, one board state per cycle")
     if few:
-        options = replace(options, angle_sigma_rad=max(options.angle_sigma_rad,
-                                                       options.few_diode_sigma_rad))
+        options = replace(
+            options,
+            angle_sigma_rad=max(options.angle_sigma_rad, options.few_diode_sigma_rad),
+            board_step_quantile=options.board_step_quantile or FEW_DIODE_STEP_QUANTILE)
     return angles, options, few
 
 
 def few_diode(angles: Angles) -> bool:
     """Whether the median sweep of ``angles`` holds fewer than ``FEW_DIODES`` hits."""
     return bool(np.median(np.bincount(angles.sweep_ids())) < FEW_DIODES)
-
-
-def co_logged(angles: Angles) -> bool:
-    """Whether some station of ``angles`` logs its two sweeps of a cycle together."""
-    return max(co_logged_fraction(angles).values(), default=0.0) > 0.5
 
 
 def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: OptimizerResult,

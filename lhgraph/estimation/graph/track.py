@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import partial
 
 import numpy as np
@@ -31,7 +31,7 @@ from lhgraph.estimation.graph.factors import build_graph
 from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import LMParams, OptimizerResult, levenberg_marquardt
 from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.solver import FEW_DIODE_STEP_QUANTILE, few_diode_preparation
+from lhgraph.estimation.graph.solver import few_diode_preparation
 from lhgraph.estimation.graph.variables import BOARD_POSE, initial_values
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp import board_poses
@@ -247,10 +247,8 @@ def track(board: Board, angles: Angles, stations: Stations,
     values = initial_values(ev.layout, init)
     hook = NoiseAdaptation(ev, options, progress) if NoiseAdaptation.enabled(options) else None
     try:
-        params = LMParams.from_options(options)
-        if options.board_step_quantile is None and few:
-            params = replace(params, board_step_quantile=FEW_DIODE_STEP_QUANTILE)
-        fit = levenberg_marquardt(graph, values, ev.cost, ev.layout, params, hook, progress)
+        fit = levenberg_marquardt(graph, values, ev.cost, ev.layout,
+                                  LMParams.from_options(options), hook, progress)
         sigma = position_sigmas(fit, problem.n_states)
     except RuntimeError as err:  # gtsam's IndeterminateLinearSystemException and kin
         raise SolverError("the linearised path cannot be solved: some board state is not "
