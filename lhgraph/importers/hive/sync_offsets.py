@@ -81,14 +81,13 @@ class SyncBitCorrection:
 
 
 def _bends(time: Array, sweep: NDArray[np.int64], sensor: NDArray[np.int64],
-           angle: Array, max_gap_s: float) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
-    """Per sweep (in time order, ``sweep`` numbered 0..S-1): its mean time, the bend (median
-    over the diodes it shares with both neighbours of its angle less the line through theirs,
-    NaN without one), the neighbours' interpolation weight ``w`` of the next sweep, and
-    whether the gap to the previous sweep is short enough to link the levels."""
+           angle: Array, max_gap_s: float) -> tuple[Array, Array, NDArray[np.bool_]]:
+    """Per sweep (in time order, ``sweep`` numbered 0..S-1): the bend (median over the diodes
+    it shares with both neighbours of its angle less the line through theirs, NaN without
+    one), the neighbours' interpolation weight ``w`` of the next sweep, and whether the gap
+    to the previous sweep is short enough to link the levels."""
     S = int(sweep.max()) + 1
-    t = np.bincount(sweep, weights=time, minlength=S) / np.maximum(
-        np.bincount(sweep, minlength=S), 1)
+    t = np.bincount(sweep, weights=time, minlength=S) / np.bincount(sweep, minlength=S)
     ids = np.unique(sensor)
     table = np.full((S, len(ids)), np.nan)
     table[sweep, np.searchsorted(ids, sensor)] = angle
@@ -101,7 +100,7 @@ def _bends(time: Array, sweep: NDArray[np.int64], sensor: NDArray[np.int64],
         d = table[1:-1] - line
         ok = np.isfinite(d).any(axis=1) & linked[1:-1] & linked[2:]
         bend[1:-1][ok] = np.nanmedian(d[ok], axis=1)
-    return t, bend, w, linked
+    return bend, w, linked
 
 
 def _huber(x: Array) -> Array:
@@ -117,7 +116,7 @@ def sync_bit_levels(time: Array, sweep: NDArray[np.int64], sensor: NDArray[np.in
     ``sweep`` ids 0..S-1 in time order, ``sensor``, ``angle`` rad), see the module
     docstring; the returned gap is fitted to the labelled bends (``gap_rad`` where no bend
     changes level)."""
-    _, bend, w, linked = _bends(time, sweep, sensor, angle, max_gap_s)
+    bend, w, linked = _bends(time, sweep, sensor, angle, max_gap_s)
     S = len(bend)
     if S < 2:
         return SyncBitLevels(np.zeros(S, bool), gap_rad, 0)
@@ -171,13 +170,12 @@ def correct_sync_bits(angles: Angles, min_fraction: float = 0.05, max_gap_error:
             rows = np.flatnonzero((angles.lighthouse == lh) & (angles.axis == ax))
             if len(rows) == 0:
                 continue
-            order = np.argsort(angles.time[rows], kind="stable")
-            rows = rows[order]
-            _, first = np.unique(ids[rows], return_index=True)
-            by_time = np.argsort(angles.time[rows][first], kind="stable")
+            rows = rows[np.argsort(angles.time[rows], kind="stable")]
+            # the series' sweeps numbered 0.. in the order of their first hits
+            _, first, which = np.unique(ids[rows], return_index=True, return_inverse=True)
             number = np.empty(len(first), dtype=np.int64)
-            number[by_time] = np.arange(len(first))
-            sweep = number[np.searchsorted(np.unique(ids[rows]), ids[rows])]
+            number[np.argsort(first)] = np.arange(len(first))
+            sweep = number[which]
             lev = sync_bit_levels(angles.time[rows], sweep, angles.sensor[rows],
                                   angles.angle[rows])
             levels[(lh, ax)] = lev
