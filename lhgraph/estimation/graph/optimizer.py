@@ -141,13 +141,25 @@ def _root_step_sigmas(tree: gtsam.GaussianBayesTree, delta: gtsam.VectorValues,
     return float(np.max(steps)) if steps else 0.0
 
 
-def _damping(values: gtsam.Values, lam: float) -> gtsam.GaussianFactorGraph:
-    """Levenberg-Marquardt damping ``sqrt(lam) I`` on every variable."""
-    damp = gtsam.GaussianFactorGraph()
-    for key, dim in values.dims().items():
-        damp.add(gtsam.JacobianFactor(key, np.sqrt(lam) * np.eye(dim), np.zeros(dim),
-                                      gtsam.noiseModel.Unit.Create(dim)))
-    return damp
+class _Damping:
+    """Levenberg-Marquardt damping ``sqrt(lam) I`` on every variable of ``values``, one graph
+    per ``lam`` built on first use (a graph holds a factor per variable: thousands of Python
+    constructions that an LM run would otherwise repeat for every damped try)."""
+
+    def __init__(self, values: gtsam.Values):
+        self._dims = list(values.dims().items())
+        self._graphs: dict[float, gtsam.GaussianFactorGraph] = {}
+
+    def __call__(self, lam: float) -> gtsam.GaussianFactorGraph:
+        if lam not in self._graphs:
+            damp = gtsam.GaussianFactorGraph()
+            eye = {d: np.sqrt(lam) * np.eye(d) for d in {d for _, d in self._dims}}
+            zero = {d: np.zeros(d) for d in eye}
+            unit = {d: gtsam.noiseModel.Unit.Create(d) for d in eye}
+            for key, dim in self._dims:
+                damp.add(gtsam.JacobianFactor(key, eye[dim], zero[dim], unit[dim]))
+            self._graphs[lam] = damp
+        return self._graphs[lam]
 
 
 def limit_board_steps(delta: gtsam.VectorValues, layout: VariableLayout, max_rad: float,
@@ -195,10 +207,11 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
     converged = False
     iterations = 0
     previous_step = None  # the last accepted station step at the current noise levels
+    damping = _Damping(values)
     for iterations in range(1, params.max_iterations + 1):
         lin = graph.linearize(values)
         while True:
-            system = lin if lam == 0.0 else _joined(lin, _damping(values, lam))
+            system = lin if lam == 0.0 else _joined(lin, damping(lam))
             tree = system.eliminateMultifrontal(ordering)
             delta = tree.optimize()
             # the full step first; if it fails, the same step within each board state's
