@@ -15,7 +15,9 @@ percentiles of the position error after the best rigid fit.
 stations TOML, its ``ootx.toml`` and ``crazyflie_deck``) evaluated the same way (positions
 only), over every pose and again over the poses at moments (b) could use (every station
 seen within ``--max-gap`` on both sides: where one station alone sees the deck, the
-tracking error dominates whatever the geometry). Tracking takes minutes, so it is run
+tracking error dominates whatever the geometry), and over those where every diode's two
+sweeps from every station are that near (the deck fully seen: the position no longer rests
+on the 4-diode pattern's size or on the motion prior). Tracking takes minutes, so it is run
 beforehand and passed in, e.g.
 
     lhgraph track --stations DIR/stations-cfclient.toml --angles DIR/angles.csv \
@@ -111,12 +113,17 @@ def crossing_beam_positions(angles: Angles, stations: Stations, max_gap_s: float
     return moments[ok], P[ok]
 
 
-def seen_by_all(angles: Angles, t: np.ndarray, max_gap_s: float) -> np.ndarray:
-    """Whether every station has a hit within ``max_gap_s`` before and after each of ``t``
-    (the moments measure (b) can use)."""
+def seen_by_all(angles: Angles, t: np.ndarray, max_gap_s: float, every_diode: bool = False
+                ) -> np.ndarray:
+    """Whether every station (``every_diode``: every sweep of every diode of every station) has
+    a hit within ``max_gap_s`` before and after each of ``t`` (the moments measure (b) can
+    use; with ``every_diode``, those where each diode's two rays can be crossed)."""
+    columns = (angles.lighthouse, angles.axis, angles.sensor) if every_diode \
+        else (angles.lighthouse,)
+    keys, series = np.unique(np.stack(columns, axis=1), axis=0, return_inverse=True)
     ok = np.ones(len(t), dtype=bool)
-    for s in angles.stations():
-        ts = np.unique(angles.time[angles.lighthouse == s])
+    for j in range(len(keys)):
+        ts = np.unique(angles.time[series.ravel() == j])
         if len(ts) < 2:
             return np.zeros(len(t), dtype=bool)
         i = np.clip(np.searchsorted(ts, t), 1, len(ts) - 1)
@@ -214,11 +221,15 @@ def main() -> None:
         for name, tr in tracks:
             e, d0, d1 = aligned_errors(tr.time, tr.T_world_board[:, :3, 3], t_m, p_m)
             lines.append(row(name, e, d0, d1, len(e)))
-        for name, tr in tracks:  # the poses at moments (b) could use: both stations seen
-            sel = seen_by_all(angles, tr.time, args.max_gap)
-            e, d0, d1 = aligned_errors(tr.time[sel], tr.T_world_board[sel, :3, 3], t_m, p_m)
-            lines.append(row(f"{name}, both stations within {args.max_gap * 1e3:.0f} ms", e,
-                             d0, d1, len(e)))
+        gap = f"{args.max_gap * 1e3:.0f} ms"
+        for every_diode, moments in ((False, f"both stations within {gap}"),
+                                     (True, f"every diode's two sweeps from both stations "
+                                            f"within {gap}")):
+            for name, tr in tracks:  # the poses at moments (b) could use
+                sel = seen_by_all(angles, tr.time, args.max_gap, every_diode)
+                e, d0, d1 = aligned_errors(tr.time[sel], tr.T_world_board[sel, :3, 3], t_m,
+                                           p_m)
+                lines.append(row(f"{name}, {moments}", e, d0, d1, len(e)))
     else:
         lines.append("Not measured: no `--track` trajectory given.")
     lines += ["", f"Run time: {time.perf_counter() - start:.1f} s.", ""]
