@@ -14,10 +14,11 @@
      so the two rows differ only by the log's common delay: a check of the importer's hit
      times, not a file the contract allows as such (its ``time`` is not the hit time).
 3. ``lhgraph track`` of the log through cfclient's geometry and through ours (hit times),
-   the two in parallel processes (wall time of each in the table).
+   each without and with the deck's IMU (``--imu imu.csv``), two at a time in parallel
+   processes (wall time of each in the table).
 4. ``benchmarks/crazyflie_evaluation.py``: (b) for cfclient's geometry and both of ours, (a)
-   for the two tracks; the ratio of medians ours (hit times) / cfclient's for both (issue
-   #14's target: <= 0.6).
+   for the four tracks; the ratio of medians ours (hit times) / cfclient's for (b), for (a)
+   without the IMU and for (a) with it on both sides (issue #14's target: <= 0.6).
 Skips (exit 0, one line) without the shared data.
 """
 
@@ -55,6 +56,30 @@ def with_log_stamps(angles: Angles) -> Angles:
                   angles.sensor[order], angles.angle[order])
 
 
+def run_tracks(tracks: dict[str, tuple[Path, list[str]]], imp: Path, work: Path
+               ) -> dict[str, float]:
+    """``lhgraph track`` of the imported log through each ``name: (stations, extra args)``,
+    two at a time (the machine's cores), to ``work/track-<i>.csv``: wall seconds of each."""
+    seconds = {}
+    items = list(tracks.items())
+    for first in range(0, len(items), 2):
+        tic = time.perf_counter()
+        running = {name: subprocess.Popen(
+            [sys.executable, "-m", "lhgraph", "track", "--stations", str(stations), "--board",
+             str(imp / "board.toml"), "--angles", str(imp / "angles.csv"), "--calibration",
+             str(imp / "ootx.toml"), "--output", str(work / f"track-{first + i}.csv"),
+             "--force", "--quiet", *extra])
+            for i, (name, (stations, extra)) in enumerate(items[first:first + 2])}
+        while len(seconds) < first + len(running):  # each track's own end
+            for name, proc in running.items():
+                if name not in seconds and proc.poll() is not None:
+                    if proc.returncode:
+                        raise SystemExit("lhgraph track failed")
+                    seconds[name] = time.perf_counter() - tic
+            time.sleep(0.2)
+    return seconds
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--import-dir", type=Path, help="output of lhgraph import crazyflie")
@@ -90,22 +115,12 @@ def main() -> int:
         rows.append(f"| {name} | {len(its)} | {res.removeprefix('residuals: ')} | "
                     f"{np.linalg.norm(T_0_1[:3, 3]):.4f} | {seconds:.0f} |")
         geometries.append(f"ours ({name})={out}")
-    tracks = {"cfclient": imp / "stations-cfclient.toml",
-              "ours (hit times)": work / "stations-hit-times.toml"}
-    tic = time.perf_counter()
-    running = {name: subprocess.Popen(
-        [sys.executable, "-m", "lhgraph", "track", "--stations", str(stations), "--board",
-         str(imp / "board.toml"), "--angles", str(imp / "angles.csv"), "--calibration",
-         str(imp / "ootx.toml"), "--output", str(work / f"track-{i}.csv"), "--force",
-         "--quiet"]) for i, (name, stations) in enumerate(tracks.items())}
-    track_s = {}
-    while len(track_s) < len(running):  # each track's own end
-        for name, proc in running.items():
-            if name not in track_s and proc.poll() is not None:
-                if proc.returncode:
-                    raise SystemExit("lhgraph track failed")
-                track_s[name] = time.perf_counter() - tic
-        time.sleep(0.2)
+    tracks = {"cfclient": (imp / "stations-cfclient.toml", []),
+              "ours (hit times)": (work / "stations-hit-times.toml", []),
+              "cfclient + IMU": (imp / "stations-cfclient.toml", ["--imu", str(imp / "imu.csv")]),
+              "ours (hit times) + IMU": (work / "stations-hit-times.toml",
+                                         ["--imu", str(imp / "imu.csv")])}
+    track_s = run_tracks(tracks, imp, work)
     evaluation = work / "evaluation.md"
     subprocess.run([sys.executable, str(ROOT / "benchmarks/crazyflie_evaluation.py"),
                     "--import-dir", str(imp), "--output", str(evaluation), "--stations",
@@ -119,10 +134,14 @@ def main() -> int:
               for part, lines_ in (("b", table[2:2 + len(geometries)]),
                                    ("a", table[4 + len(geometries):]))
               for line in lines_}
-    ratios = [f"- measure ({m}): median {median[(m, ours)]:.1f} mm with ours (hit times) "
-              f"against {median[(m, 'cfclient')]:.1f} mm with cfclient's: ratio "
-              f"**{median[(m, ours)] / median[(m, 'cfclient')]:.2f}** (target <= 0.6)"
-              for m, ours in (("b", "ours (hit times)"), ("a", "ours (hit times)"))]
+    ratios = [f"- measure ({m}){how}: median {median[(m, ours)]:.1f} mm with ours (hit times) "
+              f"against {median[(m, theirs)]:.1f} mm with cfclient's: ratio "
+              f"**{median[(m, ours)] / median[(m, theirs)]:.2f}** (target <= 0.6)"
+              for m, how, ours, theirs in (
+                  ("b", "", "ours (hit times)", "cfclient"),
+                  ("a", "", "ours (hit times)", "cfclient"),
+                  ("a", ", both tracks with the IMU", "ours (hit times) + IMU",
+                   "cfclient + IMU"))]
     track_rows = [f"- `lhgraph track` through {name}'s geometry: {s:.0f} s (two tracks in "
                   "parallel on the machine's cores)" for name, s in track_s.items()]
     lines = ["# The shared Crazyflie LH1 log calibrated by lhgraph", "",

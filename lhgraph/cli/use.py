@@ -21,6 +21,8 @@ def add_track(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        ("--output", "trajectory CSV to write")):
         p.add_argument(flag, required=True, help=what)
     p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
+    p.add_argument("--imu", help="the receiver's imu.csv (board frame, the angles' clock): "
+                   "gyro and accelerometer factors (batch only; docs/track.md)")
     p.add_argument("--streaming", action="store_true", help="one sync cycle at a time")
     p.add_argument("--delay", type=float, metavar="S",
                    help="streaming: report each state S seconds after it (docs/track.md)")
@@ -33,7 +35,8 @@ def run_track(args: argparse.Namespace) -> int:
 
     progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
     out = track_files(args.board, args.angles, args.stations, args.output, args.calibration,
-                      args.streaming, args.force, progress=progress, delay_s=args.delay)
+                      args.streaming, args.force, progress=progress, delay_s=args.delay,
+                      imu=args.imu)
     if not args.quiet:
         print(out.summary())
     return 0

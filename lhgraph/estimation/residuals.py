@@ -156,3 +156,46 @@ def motion_residuals(
     H_V0 = np.concatenate([-dt[:, None, None] * eye, -eye], axis=1)
     H_V1 = np.concatenate([zero, eye], axis=1)
     return e, (H_X0, H_V0, H_X1, H_V1)
+
+
+def gyro_residuals(V: Array, bias: Array, rate: Array) -> Array:
+    """Gyro residuals ``(K, 3)``: state k's angular rate ``V[k, :3]`` plus the gyro ``bias``
+    (3,) minus the gyro's reading ``rate[k]`` at the state's time (rad/s, board frame). Linear:
+    the Jacobian is ``[I 0]`` on the twist and ``I`` on the bias."""
+    return V[:, :3] + bias - rate
+
+
+def accel_residuals(
+    X0: Array, V0: Array, X1: Array, V1: Array, dt: Array, force: Array, accel_bias: Array,
+    gravity: Array, jacobians: bool = True,
+) -> tuple[Array, tuple[Array, Array, Array, Array, Array, Array] | None]:
+    """Accelerometer residuals ``(K, 3)`` (m/s^2, world frame) between consecutive states.
+
+    The world-frame velocity ``u = R v`` changes over the step by the mean acceleration:
+    ``e = (R1 v1 - R0 v0) / dt - R0 (force - accel_bias) - gravity``, ``force`` (K, 3) the
+    specific force over the step in state 0's board frame (what an accelerometer at the board
+    origin reads, +9.81 m/s^2 up at rest), ``accel_bias`` (3,) its bias, ``gravity`` (3,) the
+    gravity vector in the world (pointing down). Jacobians ``(H_X0, H_V0, H_X1, H_V1, H_bias,
+    H_gravity)``: ``(K, 3, 6)`` for the poses (right perturbations; the translation columns
+    are zero) and twists, ``(K, 3, 3)`` for the bias and gravity."""
+    R0, R1 = X0[:, :3, :3], X1[:, :3, :3]
+    v0, v1 = V0[:, 3:], V1[:, 3:]
+    inv_dt = 1.0 / dt[:, None]
+    specific = force - accel_bias
+    e = (np.einsum("kij,kj->ki", R1, v1) - np.einsum("kij,kj->ki", R0, v0)) * inv_dt \
+        - np.einsum("kij,kj->ki", R0, specific) - gravity
+    if not jacobians:
+        return e, None
+    K = len(dt)
+    H_X0 = np.zeros((K, 3, 6))
+    H_X1 = np.zeros((K, 3, 6))
+    H_V0 = np.zeros((K, 3, 6))
+    H_V1 = np.zeros((K, 3, 6))
+    # d(R exp(theta) a)/d theta = -R [a]x
+    H_X0[:, :, :3] = R0 @ skew(v0 * inv_dt + specific)
+    H_X1[:, :, :3] = -R1 @ skew(v1 * inv_dt)
+    H_V0[:, :, 3:] = -R0 * inv_dt[:, :, None]
+    H_V1[:, :, 3:] = R1 * inv_dt[:, :, None]
+    H_bias = R0.copy()
+    H_gravity = np.broadcast_to(-np.eye(3), (K, 3, 3)).copy()
+    return e, (H_X0, H_V0, H_X1, H_V1, H_bias, H_gravity)

@@ -28,38 +28,14 @@ from lhgraph.estimation.world_alignment import (
     up_from_ootx,
 )
 from lhgraph.io.cfclient import SystemConfig, write_system_config
-from lhgraph.io.files import check_writable, read_csv_columns
+from lhgraph.io.files import check_writable
+from lhgraph.io.imu import ImuStream, load_imu
 from lhgraph.io.stations import Stations, load_stations
 from lhgraph.io.trajectory import Trajectory, load_trajectory
 from lhgraph.model.calibration import StationCalibration, load_calibration
 
-IMU_COLUMNS = tuple((name, float) for name in ("time", "ax", "ay", "az"))
-GYRO_COLUMNS = ("gx", "gy", "gz")
 LH2_REFUSAL = ("LH2 stations cannot be exported yet (they come with issue #15): this "
                "export writes LH1 systems (systemType 1)")
-
-
-@dataclass(frozen=True)
-class ImuStream:
-    """An IMU stream in the board frame: ``time`` (N,) s, ``accel_mps2`` (N, 3) and
-    ``gyro_rad_s`` (N, 3) or None."""
-
-    time: np.ndarray
-    accel_mps2: np.ndarray
-    gyro_rad_s: np.ndarray | None = None
-
-
-def load_imu(path: str | Path) -> ImuStream:
-    """Read an ``imu.csv`` (``time,ax,ay,az[,gx,gy,gz]``, s, m/s^2, rad/s; docs/formats.md)."""
-    c = read_csv_columns(path, IMU_COLUMNS, optional=GYRO_COLUMNS)
-    if len(c["time"]) < 3:
-        raise InputError(f"{len(c['time'])} rows: an up direction needs at least 3", path)
-    if np.any(back := np.diff(c["time"]) <= 0):
-        raise InputError("time must increase", path, str(int(np.flatnonzero(back)[0]) + 3))
-    accel = np.stack([c["ax"], c["ay"], c["az"]], axis=1)
-    gyro = (np.stack([c[k] for k in GYRO_COLUMNS], axis=1)
-            if all(k in c for k in GYRO_COLUMNS) else None)
-    return ImuStream(c["time"], accel, gyro)
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,7 @@ from lhgraph.estimation.graph.streaming import DELAY_S, track_stream
 from lhgraph.estimation.graph.track import TrackedPath, track
 from lhgraph.io.angles import load_angles
 from lhgraph.io.files import check_writable
+from lhgraph.io.imu import load_imu
 from lhgraph.io.stations import load_stations
 from lhgraph.io.trajectory import save_trajectory
 from lhgraph.model.boards import board_by_name
@@ -54,14 +55,17 @@ class TrackOutput:
 def track_files(board: str | Path, angles: str | Path, stations: str | Path, output: str | Path,
                 calibration: str | Path | None = None, streaming: bool = False,
                 overwrite: bool = False, options: GraphOptions | None = None,
-                progress: Progress | None = None, delay_s: float | None = None
-                ) -> TrackOutput:
+                progress: Progress | None = None, delay_s: float | None = None,
+                imu: str | Path | None = None) -> TrackOutput:
     """Track the board of ``board`` (a board TOML or a built-in name) through ``angles`` with
     the stations of ``stations`` held fixed (factory calibration from ``calibration`` if
     given, else the stations file's keys) and write the trajectory CSV ``output``;
     ``streaming``: per sync cycle, each state as estimated ``delay_s`` after it (default
-    :data:`~lhgraph.estimation.graph.streaming.DELAY_S`)."""
+    :data:`~lhgraph.estimation.graph.streaming.DELAY_S`); ``imu``: the receiver's
+    ``imu.csv`` (board frame, the angles' clock) for the graph's IMU factors (batch only)."""
     check_writable(output, overwrite)
+    if imu is not None and streaming:
+        raise InputError("IMU factors are batch only: drop --streaming or --imu", "--imu")
     delay_s = DELAY_S if delay_s is None else delay_s
     if not 0 <= delay_s < 0.5:
         raise InputError(f"must be in [0, 0.5) s, the smoother's lag (got {delay_s:g})",
@@ -76,6 +80,7 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
         raise InputError(f"no [lighthouses.<index>] table for station(s) "
                          f"{', '.join(map(str, missing))} seen in {angles}", stations)
     models = station_models(calibration)
+    stream = None if imu is None else load_imu(imu)
     if streaming:
         estimates = list(track_stream(the_board, the_angles, fixed, models, options,
                                       delay_s=delay_s))
@@ -85,7 +90,8 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
         path = TrackedPath.concatenate([e.path for e in estimates if e.path])
         cycle_s, status = [e.update_s for e in estimates[1:-1]], "streaming"
     else:
-        result = track(the_board, the_angles, fixed, models, options, progress=progress)
+        result = track(the_board, the_angles, fixed, models, options, progress=progress,
+                       imu=stream)
         path, cycle_s, status = result.path, [], result.status
     written = save_trajectory(path.trajectory, output, overwrite, path.columns())
     return TrackOutput(path, written, streaming, cycle_s, status)

@@ -21,12 +21,21 @@ from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import (
     BOARD_POSE,
     BOARD_TWIST,
+    GRAVITY,
+    IMU_BIAS,
     STATION_POSE,
     SWEEP_OFFSET,
     VariableLayout,
 )
+from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, STANDARD_GRAVITY, InertialData
 from lhgraph.estimation.problem import GraphProblem
-from lhgraph.estimation.residuals import bearing_residuals, motion_residuals, wnoa_covariance
+from lhgraph.estimation.residuals import (
+    accel_residuals,
+    bearing_residuals,
+    gyro_residuals,
+    motion_residuals,
+    wnoa_covariance,
+)
 
 Array = NDArray[np.float64]
 FactorError = Callable[[gtsam.CustomFactor, gtsam.Values, list | None], Array]
@@ -56,11 +65,14 @@ class FactorEvaluator:
     :meth:`motion_psd_factor`, :meth:`motion_chi2_per_dof`.
 
     Station slots that are no variable of ``layout`` are held at ``T_world_lh`` ``(S, 4, 4)``
-    (default: the identity, i.e. the reference station is the world).
+    (default: the identity, i.e. the reference station is the world). With ``inertial``
+    (the layout then holds the IMU bias and gravity) the cost also has the gyro and
+    accelerometer factors (noise ``options.gyro_sigma_rad_s``, ``options.accel_sigma_mps2``).
     """
 
     def __init__(self, problem: GraphProblem, layout: VariableLayout, loss: RobustLoss,
-                 options: GraphOptions, T_world_lh: Array | None = None):
+                 options: GraphOptions, T_world_lh: Array | None = None,
+                 inertial: InertialData | None = None):
         self.problem = problem
         self.layout = layout
         self.loss = loss
@@ -84,6 +96,10 @@ class FactorEvaluator:
         self._motion_scale = 1.0  # 1/sqrt(s): the motion prior's covariance is s * Q
         self._bearing_scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
         self._jacobians_ready = False
+        self.inertial = inertial
+        self.gyro_sigma = options.gyro_sigma_rad_s
+        self.accel_sigma = options.accel_sigma_mps2
+        self._imu = np.zeros(9)  # IMU bias (gyro, accelerometer), gravity
 
     # --- noise levels --------------------------------------------------------------------
 
@@ -129,7 +145,8 @@ class FactorEvaluator:
         self.evaluate(values)
         bearing = self.loss.cost(self._r_whitened / self._sigma0)
         offsets = 0.5 * (self._O / self._offset_sigma) ** 2
-        return float(bearing.sum() + offsets.sum() + 0.5 * self._motion_chi2().sum())
+        return float(bearing.sum() + offsets.sum() + 0.5 * self._motion_chi2().sum()
+                     + self._inertial_cost())
 
     def bearing_residuals(self) -> Array:
         """Per-hit angle residual, predicted (+ sweep offset) - measured (rad), in the
@@ -179,18 +196,79 @@ class FactorEvaluator:
 
     def motion_error(self, k: int) -> FactorError:
         """Callback of the motion prior between states k and k + 1."""
+        return self._step_callback(k, "_e", "_He")
+
+    def accel_error(self, k: int) -> FactorError:
+        """Callback of the accelerometer factor over the step from state k to k + 1 (keys as
+        in :func:`lhgraph.estimation.graph.factors.accel_keys`)."""
+        return self._step_callback(k, "_a", "_Ha")
+
+    def gravity_error(self) -> FactorError:
+        """Callback of the gravity-magnitude factor: ``|g| - STANDARD_GRAVITY`` (m/s^2); with
+        the magnitude known, the accelerometer bias along the mean up separates from it."""
+        def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
+            g = values.atVector(GRAVITY.key(0))
+            norm = float(np.linalg.norm(g))
+            if H is not None:
+                H[0] = (g / max(norm, 1e-9))[None]
+            return np.array([norm - STANDARD_GRAVITY])
+
+        return error
+
+    def imu_bias(self) -> Array:
+        """The IMU bias ``[gyro (rad/s), accelerometer (m/s^2)]`` (6,) now (zeros without)."""
+        return self._imu[:6].copy()
+
+    def gravity(self) -> Array:
+        """The gravity vector (m/s^2, world) now (zeros without IMU factors)."""
+        return self._imu[6:].copy()
+
+    def inertial_residuals(self) -> tuple[Array, Array]:
+        """Gyro (K, 3, rad/s) and accelerometer (K - 1, 3, m/s^2) residuals at the evaluated
+        point (NaN where the IMU has no sample; empty without IMU factors)."""
+        if self.inertial is None:
+            return np.zeros((0, 3)), np.zeros((0, 3))
+        g = np.where(self.inertial.rate_ok[:, None], self._g, np.nan)
+        a = np.where(self.inertial.force_ok[:, None], self._a, np.nan)
+        return g, a
+
+    def inertial_summary(self) -> dict[str, float]:
+        """What the IMU factors found at the evaluated point: the gyro and accelerometer
+        biases' norms, the gravity's magnitude, the rms gyro and accelerometer residuals
+        (empty without IMU factors)."""
+        if self.inertial is None:
+            return {}
+        gyro, accel = self.inertial_residuals()
+        return {"gyro_bias_rad_s": float(np.linalg.norm(self._imu[:3])),
+                "accel_bias_mps2": float(np.linalg.norm(self._imu[3:6])),
+                "gravity_mps2": float(np.linalg.norm(self._imu[6:])),
+                "gyro_rms_rad_s": float(np.sqrt(np.nanmean(gyro**2))),
+                "accel_rms_mps2": float(np.sqrt(np.nanmean(accel**2)))}
+
+    # --- internals ------------------------------------------------------------------------
+
+    def _step_callback(self, k: int, residuals: str, jacobians: str) -> FactorError:
+        """Callback of a factor between states k and k + 1 whose residual and Jacobians are
+        row k of the evaluator's arrays named ``residuals`` and ``jacobians``."""
         def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
             self._ensure(values, k, None)
             self._ensure(values, k + 1, None)
             if H is not None:
                 self._jacobians()
-                for j in range(4):
-                    H[j] = self._He[j][k]
-            return self._e[k]
+                for j, H_j in enumerate(getattr(self, jacobians)):
+                    H[j] = H_j[k]
+            return getattr(self, residuals)[k]
 
         return error
 
-    # --- internals ------------------------------------------------------------------------
+    def _inertial_cost(self) -> float:
+        if self.inertial is None:
+            return 0.0
+        d = self.inertial
+        g = self._g[d.rate_ok] / self.gyro_sigma
+        a = self._a[d.force_ok] / self.accel_sigma
+        m = (np.linalg.norm(self._imu[6:]) - STANDARD_GRAVITY) / GRAVITY_SIGMA_MPS2
+        return 0.5 * float(np.sum(g * g) + np.sum(a * a) + m * m)
 
     def _scale_residuals(self) -> None:
         self._r_whitened = self._r * self._bearing_scale
@@ -213,6 +291,11 @@ class FactorEvaluator:
         self._r += self._O[h.state]
         self._e_raw = motion_residuals(self._X[:-1], self._W[:-1], self._X[1:], self._W[1:],
                                        self._dt, False)[0]
+        if self.inertial is not None:
+            self._imu = np.concatenate([values.atVector(IMU_BIAS.key(0)),
+                                        values.atVector(GRAVITY.key(0))])
+            self._g = gyro_residuals(self._W, self._imu[:3], self.inertial.rate)
+            self._a = self._accel(False)[0]
         self._scale_residuals()
         self._values = values
 
@@ -228,7 +311,17 @@ class FactorEvaluator:
         _, He = motion_residuals(self._X[:-1], self._W[:-1], self._X[1:], self._W[1:],
                                  self._dt)
         self._He = tuple(H * self._motion_scale for H in He)
+        if self.inertial is not None:
+            _, Ha = self._accel(True)
+            H_bias = np.zeros((len(Ha[4]), 3, 6))
+            H_bias[:, :, 3:] = Ha[4]
+            self._Ha = (*Ha[:4], H_bias, Ha[5])
         self._jacobians_ready = True
+
+    def _accel(self, jacobians: bool) -> tuple[Array, tuple | None]:
+        d = self.inertial
+        return accel_residuals(self._X[:-1], self._W[:-1], self._X[1:], self._W[1:], d.dt,
+                               d.force, self._imu[3:6], self._imu[6:], jacobians)
 
     def _ensure(self, values: gtsam.Values, k: int, slot: int | None) -> None:
         # A Python-owned Values reaches every callback as the same object: identity is
@@ -239,7 +332,10 @@ class FactorEvaluator:
                 and np.array_equal(values.atVector(BOARD_TWIST.key(k)), self._W[k])
                 and values.atVector(SWEEP_OFFSET.key(k))[0] == self._O[k]
                 and (slot is None or np.array_equal(
-                    values.atPose3(STATION_POSE.key(slot)).matrix(), self._L[slot]))):
+                    values.atPose3(STATION_POSE.key(slot)).matrix(), self._L[slot]))
+                and (self.inertial is None or (
+                    np.array_equal(values.atVector(IMU_BIAS.key(0)), self._imu[:6])
+                    and np.array_equal(values.atVector(GRAVITY.key(0)), self._imu[6:])))):
             self._values = values
             return
         self._read(values)

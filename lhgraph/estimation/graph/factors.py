@@ -8,7 +8,11 @@
    (:mod:`lhgraph.estimation.graph.loss`);
 2. **sweep-offset prior** on every offset (GTSAM's ``PriorFactorVector``, zero mean);
 3. **motion prior** (white noise on acceleration) between consecutive states, keys
-   :func:`motion_keys`.
+   :func:`motion_keys`;
+4. with an IMU stream (:mod:`lhgraph.estimation.inertial`): a **gyro factor** on every
+   state's twist and the IMU bias (linear: GTSAM's ``LinearContainerFactor``, no Python
+   callback), an **accelerometer factor** over every step, keys :func:`accel_keys`, and
+   one factor on the gravity's magnitude.
 
 The residuals come from :mod:`lhgraph.estimation.residuals`; who evaluates them is the
 caller's choice (the batch graph's vectorised :class:`FactorEvaluator`, the streaming
@@ -27,10 +31,13 @@ from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import (
     BOARD_POSE,
     BOARD_TWIST,
+    GRAVITY,
+    IMU_BIAS,
     STATION_POSE,
     SWEEP_OFFSET,
     VariableLayout,
 )
+from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, InertialData
 from lhgraph.estimation.problem import GraphProblem
 
 Array = NDArray[np.float64]
@@ -46,6 +53,24 @@ def bearing_keys(k: int, station_var: int | None) -> list[int]:
 def motion_keys(k: int) -> list[int]:
     """Keys of the motion prior between states k and k + 1."""
     return [BOARD_POSE.key(k), BOARD_TWIST.key(k), BOARD_POSE.key(k + 1), BOARD_TWIST.key(k + 1)]
+
+
+def accel_keys(k: int) -> list[int]:
+    """Keys of the accelerometer factor over the step from state k to k + 1."""
+    return motion_keys(k) + [IMU_BIAS.key(0), GRAVITY.key(0)]
+
+
+def gyro_factor(k: int, rate: Array, sigma_rad_s: float) -> gtsam.LinearContainerFactor:
+    """State k's gyro factor: ``omega_k + gyro bias = rate`` (3,) rad/s, linear, as a
+    nonlinear factor linearised at zero (exact: both variables are vectors)."""
+    A_twist = np.hstack([np.eye(3), np.zeros((3, 3))])
+    keys = (BOARD_TWIST.key(k), IMU_BIAS.key(0))
+    linear = gtsam.JacobianFactor(keys[0], A_twist, keys[1], A_twist, rate,
+                                  gtsam.noiseModel.Isotropic.Sigma(3, sigma_rad_s))
+    zero = gtsam.Values()
+    zero.insert(keys[0], np.zeros(6))
+    zero.insert(keys[1], np.zeros(6))
+    return gtsam.LinearContainerFactor(linear, zero)
 
 
 class FactorBuilder:
@@ -73,16 +98,18 @@ class FactorBuilder:
                                   motion_keys(k), error)
 
 
-def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array | None = None
+def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array | None = None,
+                inertial: InertialData | None = None
                 ) -> tuple[gtsam.NonlinearFactorGraph, FactorEvaluator]:
     """The nonlinear factor graph of ``problem`` (one bearing factor per sweep, the offset
-    priors, the motion priors) and the evaluator its callbacks slice. ``T_world_lh``
-    ``(S, 4, 4)`` by station slot holds every station fixed at that pose (tracking); without
-    it the stations but the reference are variables."""
+    priors, the motion priors, and with ``inertial`` the IMU factors) and the evaluator its
+    callbacks slice. ``T_world_lh`` ``(S, 4, 4)`` by station slot holds every station fixed
+    at that pose (tracking); without it the stations but the reference are variables."""
     loss = RobustLoss(options.loss, options.huber_k)
     layout = VariableLayout.of_problem(problem.n_states, len(problem.station_ids),
-                                       fixed_stations=T_world_lh is not None)
-    ev = FactorEvaluator(problem, layout, loss, options, T_world_lh)
+                                       fixed_stations=T_world_lh is not None,
+                                       inertial=inertial is not None)
+    ev = FactorEvaluator(problem, layout, loss, options, T_world_lh, inertial)
     build = FactorBuilder(loss, options.sweep_offset_sigma_rad)
     graph = gtsam.NonlinearFactorGraph()
     for k in range(problem.n_states):
@@ -94,4 +121,13 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
         graph.add(build.offset_prior(k))
     for k in range(problem.n_states - 1):
         graph.add(build.motion(k, ev.motion_covariances[k], ev.motion_error(k)))
+    if inertial is not None:
+        for k in np.flatnonzero(inertial.rate_ok).tolist():
+            graph.add(gyro_factor(k, inertial.rate[k], options.gyro_sigma_rad_s))
+        accel_noise = gtsam.noiseModel.Isotropic.Sigma(3, options.accel_sigma_mps2)
+        for k in np.flatnonzero(inertial.force_ok).tolist():
+            graph.add(gtsam.CustomFactor(accel_noise, accel_keys(k), ev.accel_error(k)))
+        graph.add(gtsam.CustomFactor(
+            gtsam.noiseModel.Isotropic.Sigma(1, GRAVITY_SIGMA_MPS2), [GRAVITY.key(0)],
+            ev.gravity_error()))
     return graph, ev

@@ -133,12 +133,14 @@ def largest_board_step(delta: gtsam.VectorValues, layout: VariableLayout,
 
 def _root_step_sigmas(tree: gtsam.GaussianBayesTree, delta: gtsam.VectorValues,
                       layout: VariableLayout) -> float:
-    """Largest step of any root-variable (station) coordinate in its standard deviations
-    (0 without root variables: tracking, the stations held fixed)."""
-    steps = [np.abs(delta.at(key)) / np.sqrt(np.diag(tree.marginalCovariance(key)))
+    """Largest step of any root-variable (station, IMU bias, gravity) coordinate in its
+    standard deviations (0 without root variables: tracking without IMU, the stations held
+    fixed)."""
+    steps = [float(np.max(np.abs(delta.at(key))
+                          / np.sqrt(np.diag(tree.marginalCovariance(key)))))
              for family in layout.families if family.elimination == "root"
              for key in layout.keys(family)]
-    return float(np.max(steps)) if steps else 0.0
+    return max(steps, default=0.0)
 
 
 class _Damping:

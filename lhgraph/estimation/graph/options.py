@@ -47,7 +47,11 @@ class GraphOptions:
     tried again with each board state's rotation / translation step scaled down to these
     (a trust region per state: a state far from its solution, e.g. a mirror pose, turns this
     far instead of taking a step the linearisation does not hold) before the damping that
-    slows every variable. Each field's
+    slows every variable; ``gyro_sigma_rad_s`` / ``accel_sigma_mps2``: noise of the IMU
+    factors (a gyro reading at a state's time; an accelerometer reading over a step, which
+    also carries the vibration and the lever arm the model leaves out), used when an IMU
+    stream is given (:mod:`lhgraph.estimation.inertial`), whose samples count within
+    ``imu_max_gap_s`` of a state. Each field's
     allowed range is declared next to it; a value outside it raises
     :class:`~lhgraph.errors.InputError` naming the field.
     """
@@ -77,6 +81,9 @@ class GraphOptions:
     few_diode_sigma_rad: float = option(6.5e-5, gt=0)
     max_board_step_rad: float = option(0.3, gt=0)
     max_board_step_m: float = option(0.1, gt=0)
+    gyro_sigma_rad_s: float = option(0.02, gt=0)
+    accel_sigma_mps2: float = option(0.5, gt=0)
+    imu_max_gap_s: float = option(0.05, gt=0)
 
     def __post_init__(self) -> None:
         check_fields(self)

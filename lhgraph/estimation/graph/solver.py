@@ -27,6 +27,7 @@ from lhgraph.estimation.graph.optimizer import (
 )
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import STATION_POSE, initial_values
+from lhgraph.estimation.inertial import inertial_data, start_with_imu
 from lhgraph.estimation.init import Initialiser
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
@@ -34,6 +35,7 @@ from lhgraph.estimation.problem import GraphProblem, build_problem
 from lhgraph.estimation.result import Residuals, SolveResult
 from lhgraph.estimation.sweep_times import co_logged_stations, retime_cycles
 from lhgraph.io.angles import Angles
+from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import Station, Stations
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.board import Board
@@ -49,7 +51,8 @@ FEW_DIODE_STEP_QUANTILE = 0.95
 
 def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | None = None,
                 options: GraphOptions | None = None, progress: Progress | None = None,
-                initialiser: Initialiser | None = None) -> SolveResult:
+                initialiser: Initialiser | None = None, imu: ImuStream | None = None
+                ) -> SolveResult:
     """Calibrate every station's pose ``T_world_lh`` by the joint factor graph.
 
     ``angles`` as measured (rad, before factory correction), ``models`` the station models by
@@ -59,7 +62,9 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     median, too few for the default's per-measurement PnP). The sweeps of few-diode data, or
     of a receiver that logs a station's two sweeps together, are first put on each station's
     rotor grid, one board state per rotor cycle (``options.sweep_times``,
-    :func:`retime_cycles`).
+    :func:`retime_cycles`). ``imu``: the receiver's IMU stream (board frame, the angles'
+    clock): gyro and accelerometer factors join the graph (:mod:`lhgraph.estimation.inertial`)
+    and the IMU bias and the world's gravity are estimated with the stations.
     """
     options = options or GraphOptions()
     models = models or {}
@@ -77,12 +82,18 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     if initialiser is None:
         initialiser = FewDiodeInitialiser() if few else PnPKabschInitialiser()
     init = initialiser(board, angles, problem)
+    inertial = gravity = None
+    if imu is not None:
+        inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
+        init, gravity = start_with_imu(init, inertial)
     timings["initialise"] = time.perf_counter() - t0
     if progress:
-        progress(f"initialised {problem.n_states} board states, {len(problem.hits.angle)} hits")
+        progress(f"initialised {problem.n_states} board states, {len(problem.hits.angle)} hits"
+                 + ("" if inertial is None else
+                    f"; IMU factors at {int(inertial.rate_ok.sum())} states"))
     t1 = time.perf_counter()
-    graph, ev = build_graph(problem, options)
-    values = initial_values(ev.layout, init)
+    graph, ev = build_graph(problem, options, inertial=inertial)
+    values = initial_values(ev.layout, init, gravity)
     try:
         if options.solver == "lm":
             hook = (NoiseAdaptation(ev, options, progress) if NoiseAdaptation.enabled(options)
@@ -165,5 +176,5 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
         error_history=fit.error_history,
         diagnostics={"accel_psd_rot": psd_rot, "accel_psd_pos": psd_pos,
                      "motion_chi2_per_dof": ev.motion_chi2_per_dof(),
-                     "angle_sigma_rad": ev.angle_sigma()},
+                     "angle_sigma_rad": ev.angle_sigma()} | ev.inertial_summary(),
     )

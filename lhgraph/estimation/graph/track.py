@@ -33,6 +33,7 @@ from lhgraph.estimation.graph.optimizer import LMParams, OptimizerResult, levenb
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import few_diode_preparation
 from lhgraph.estimation.graph.variables import BOARD_POSE, initial_values
+from lhgraph.estimation.inertial import inertial_data, start_with_imu
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp import board_poses
 from lhgraph.estimation.init.pnp_kabsch import (
@@ -45,6 +46,7 @@ from lhgraph.estimation.problem import GraphProblem, build_problem
 from lhgraph.estimation.residuals import BearingHits, bearing_residuals
 from lhgraph.geometry.transforms import se3_exp
 from lhgraph.io.angles import Angles
+from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import Stations
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.board import Board
@@ -99,7 +101,9 @@ def path_of(problem: GraphProblem, T_world_board: Array, sigma_m: Array) -> Trac
 class TrackResult:
     """A batch track: the ``path``; ``initialised`` = PnP poses the start was made of (0 for
     few-diode data, which starts from planar twins); the
-    optimiser's status and iterations; timings (s); the learned noise levels."""
+    optimiser's status and iterations; timings (s); the learned noise levels; with an IMU
+    its estimated ``imu_bias`` ``[gyro (rad/s), accelerometer (m/s^2)]`` (6,) and
+    ``gravity`` (3,) m/s^2 in the stations' world."""
 
     path: TrackedPath
     initialised: int
@@ -107,6 +111,8 @@ class TrackResult:
     iterations: int
     timings_s: dict[str, float] = field(default_factory=dict)
     diagnostics: dict[str, float] = field(default_factory=dict)
+    imu_bias: Array | None = None
+    gravity: Array | None = None
 
 
 def station_slot_poses(stations: Stations, station_ids: list[int]) -> Array:
@@ -221,14 +227,17 @@ def position_sigmas(fit: OptimizerResult, n_states: int) -> Array:
 
 def track(board: Board, angles: Angles, stations: Stations,
           models: dict[int, StationModel] | None = None, options: GraphOptions | None = None,
-          pose_solver: PoseSolver | None = None, progress: Progress | None = None
-          ) -> TrackResult:
+          pose_solver: PoseSolver | None = None, progress: Progress | None = None,
+          imu: ImuStream | None = None) -> TrackResult:
     """The board's path ``T_world_board`` (one state per sweep; per station rotor cycle on
     few-diode data) with every station held at its
     ``T_world_lh`` in ``stations`` (the world is the stations file's). ``angles`` as measured
     (rad, before factory correction); ``models`` by station index (default: the stations
     file's); ``pose_solver`` the per-measurement PnP of a many-diode board (default: planar
-    homography; few-diode data starts from :meth:`FewDiodeInitialiser.with_stations`)."""
+    homography; few-diode data starts from :meth:`FewDiodeInitialiser.with_stations`);
+    ``imu`` the receiver's IMU stream (board frame, the angles' clock): gyro and
+    accelerometer factors join the graph (:mod:`lhgraph.estimation.inertial`), the initial
+    angular rates are the gyro's, and the IMU bias and the world's gravity are estimated."""
     options = options or GraphOptions()
     t0 = time.perf_counter()
     angles, options, few = few_diode_preparation(angles, options, progress)
@@ -239,12 +248,18 @@ def track(board: Board, angles: Angles, stations: Stations,
         n_pnp = 0
     else:
         init, n_pnp = initial_path(board, angles, problem, T_world_lh, pose_solver)
+    inertial = gravity = None
+    if imu is not None:
+        inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
+        init, gravity = start_with_imu(init, inertial)
     timings = {"initialise": time.perf_counter() - t0}
     if progress:
         progress(f"initialised {problem.n_states} board states"
-                 + (f" from {n_pnp} PnP poses" if n_pnp else " from planar twins"))
-    graph, ev = build_graph(problem, options, T_world_lh)
-    values = initial_values(ev.layout, init)
+                 + (f" from {n_pnp} PnP poses" if n_pnp else " from planar twins")
+                 + ("" if inertial is None else
+                    f"; IMU factors at {int(inertial.rate_ok.sum())} states"))
+    graph, ev = build_graph(problem, options, T_world_lh, inertial)
+    values = initial_values(ev.layout, init, gravity)
     hook = NoiseAdaptation(ev, options, progress) if NoiseAdaptation.enabled(options) else None
     try:
         fit = levenberg_marquardt(graph, values, ev.cost, ev.layout,
@@ -256,12 +271,18 @@ def track(board: Board, angles: Angles, stations: Stations,
     ev.evaluate(fit.values)
     timings["optimise"] = time.perf_counter() - t0 - timings["initialise"]
     psd_rot, psd_pos = ev.motion_psd()
+    diagnostics = {"accel_psd_rot": psd_rot, "accel_psd_pos": psd_pos,
+                   "angle_sigma_rad": ev.angle_sigma()}
+    if inertial is not None:
+        diagnostics |= ev.inertial_summary()
     return TrackResult(
         path=path_of(problem, ev.board_poses().copy(), sigma),
         initialised=n_pnp,
         status=fit.status.value,
         iterations=fit.iterations,
         timings_s=timings,
-        diagnostics={"accel_psd_rot": psd_rot, "accel_psd_pos": psd_pos,
-                     "angle_sigma_rad": ev.angle_sigma()},
+        diagnostics=diagnostics,
+        imu_bias=None if inertial is None else ev.imu_bias(),
+        gravity=None if inertial is None else ev.gravity(),
     )
+

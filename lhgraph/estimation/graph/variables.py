@@ -13,7 +13,11 @@ board pose      ``x``   6    ``T_world_board`` at sweep k (``Pose3``)
 board twist     ``w``   6    body twist ``[omega, v]`` (rad/s, m/s, board frame) at sweep k
 sweep offset    ``o``   1    angle offset (rad) common to every diode of sweep k
 station pose    ``l``   6    ``T_world_lh`` of station slot s >= 1 (slot 0 is the world)
+IMU bias        ``i``   6    gyro (rad/s) and accelerometer (m/s^2) bias, board frame
+gravity         ``n``   3    gravity vector (m/s^2) in the world
 ==============  ======  ===  ============================================================
+
+The last two exist only when the graph has IMU factors (:mod:`lhgraph.estimation.inertial`).
 """
 
 from __future__ import annotations
@@ -70,7 +74,11 @@ SWEEP_OFFSET = VariableFamily("sweep offset", "o", 1, False, "leaf", 1.0,
                               "angle offset (rad) common to every diode of sweep k")
 STATION_POSE = VariableFamily("station pose", "l", 6, True, "root", 0.1,
                               "T_world_lh of station slot s >= 1")
-FAMILIES = (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE)
+IMU_BIAS = VariableFamily("IMU bias", "i", 6, False, "root", 1.0,
+                          "gyro (rad/s) and accelerometer (m/s^2) bias, board frame")
+GRAVITY = VariableFamily("gravity", "n", 3, False, "root", 1.0,
+                         "gravity vector (m/s^2) in the world")
+FAMILIES = (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE, IMU_BIAS, GRAVITY)
 """Every family the graph and the streaming smoother know."""
 
 
@@ -97,15 +105,16 @@ class VariableLayout:
         self._n_poses = start
 
     @classmethod
-    def of_problem(cls, n_states: int, n_stations: int, fixed_stations: bool = False
-                   ) -> VariableLayout:
+    def of_problem(cls, n_states: int, n_stations: int, fixed_stations: bool = False,
+                   inertial: bool = False) -> VariableLayout:
         """The batch graph's layout: every family per board state ``0..n_states-1``, a station
         pose for slots ``1..n_stations-1`` (none with ``fixed_stations``: tracking, every
-        station held at a known pose)."""
+        station held at a known pose), and with ``inertial`` one IMU bias and the gravity."""
         states = range(n_states)
         stations = range(0) if fixed_stations else range(1, n_stations)
+        imu = range(1) if inertial else range(0)
         return cls({BOARD_POSE: states, BOARD_TWIST: states, SWEEP_OFFSET: states,
-                    STATION_POSE: stations})
+                    STATION_POSE: stations, IMU_BIAS: imu, GRAVITY: imu})
 
     @property
     def families(self) -> tuple[VariableFamily, ...]:
@@ -168,11 +177,18 @@ class VariableLayout:
             values.insert(key, gtsam.Pose3(x) if family.is_pose else x)
 
 
-def initial_values(layout: VariableLayout, init: Initialisation) -> gtsam.Values:
-    """GTSAM Values of an initialisation (sweep offsets zero)."""
+def initial_values(layout: VariableLayout, init: Initialisation,
+                   gravity: Array | None = None) -> gtsam.Values:
+    """GTSAM Values of an initialisation (sweep offsets zero); with IMU variables in the
+    layout, the IMU bias zero and ``gravity`` (3,) m/s^2 in the world."""
     values = gtsam.Values()
     layout.insert(values, STATION_POSE, init.L[layout.indices(STATION_POSE)])
     layout.insert(values, BOARD_POSE, init.X)
     layout.insert(values, BOARD_TWIST, init.V)
     layout.insert(values, SWEEP_OFFSET, np.zeros((len(init.X), 1)))
+    if layout.holds(GRAVITY, 0):
+        if gravity is None:
+            raise ValueError("a layout with IMU variables needs the initial gravity")
+        layout.insert(values, IMU_BIAS, np.zeros((1, 6)))
+        layout.insert(values, GRAVITY, np.asarray(gravity, dtype=float)[None])
     return values

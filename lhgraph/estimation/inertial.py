@@ -1,0 +1,113 @@
+"""The receiver's IMU readings at the graph's board states (gyro and accelerometer factors).
+
+A few-diode receiver (the Crazyflie deck) seen by one station at a time has a weakly
+determined tilt and range; its IMU, on the same clock, measures what the light does not:
+
+- **gyro**: at every board state k, the state's angular rate plus the gyro bias equals the
+  gyro's reading at ``t_k`` (interpolated between samples within ``max_gap_s``);
+- **accelerometer**: over every step k -> k + 1, the change of the world-frame velocity
+  ``R v`` divided by the step equals the specific force, rotated into the world, plus
+  gravity. The specific force over the step is the accelerometer's reading at the step's
+  middle, rotated into state k's frame by half a step of the gyro's rate.
+
+Residuals and Jacobians: :func:`lhgraph.estimation.residuals.gyro_residuals` and
+:func:`~lhgraph.estimation.residuals.accel_residuals`. The IMU is taken at the board origin
+and in the board frame (the Crazyflie's IMU frame is the ``crazyflie_deck`` board frame); its
+lever arm is neglected (the centripetal acceleration of a few cm at 1-2 rad/s is
+0.02-0.2 m/s^2, below the accelerometer noise the factors assume). Unknowns added to the
+graph: one IMU bias (gyro, accelerometer) and the gravity vector in the world, whose
+magnitude a factor holds near the standard gravity (``GRAVITY_SIGMA_MPS2``: otherwise an
+accelerometer bias along the mean up and the magnitude trade off over a short capture).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lhgraph.errors import InputError
+from lhgraph.geometry.transforms import so3_exp
+from lhgraph.io.imu import ImuStream
+
+if TYPE_CHECKING:
+    from lhgraph.estimation.init.pnp_kabsch import Initialisation
+
+Array = NDArray[np.float64]
+STANDARD_GRAVITY = 9.80665
+GRAVITY_SIGMA_MPS2 = 0.3
+"""How far the gravity's magnitude as the accelerometer reads it may be from the standard
+one: the local gravity varies by ~0.05 m/s^2 over the Earth, a MEMS accelerometer's scale
+by a few % (the Crazyflie log's reads 9.62 m/s^2 over 120 s): the gravity-magnitude
+factor's noise."""
+
+
+@dataclass(frozen=True)
+class InertialData:
+    """The IMU readings at a problem's K board states: ``rate`` (K, 3) the gyro at each
+    state's time (rad/s, board frame), ``rate_ok`` (K,) where it has samples within the gap;
+    ``force`` (K - 1, 3) the specific force over each step in its first state's frame
+    (m/s^2), ``force_ok`` (K - 1,) likewise; ``dt`` (K - 1,) the steps (s)."""
+
+    rate: Array
+    rate_ok: NDArray[np.bool_]
+    force: Array
+    force_ok: NDArray[np.bool_]
+    dt: Array
+
+
+def _interpolated(t: Array, x: Array, query: Array, max_gap_s: float
+                  ) -> tuple[Array, NDArray[np.bool_]]:
+    """``x`` (N, 3) sampled at ``t`` interpolated at ``query``, and where both neighbours are
+    within ``max_gap_s``."""
+    i = np.clip(np.searchsorted(t, query), 1, len(t) - 1)
+    ok = ((query >= t[0]) & (query <= t[-1]) & (query - t[i - 1] <= max_gap_s)
+          & (t[i] - query <= max_gap_s))
+    out = np.stack([np.interp(query, t, x[:, j]) for j in range(3)], axis=1)
+    return out, ok
+
+
+def inertial_data(imu: ImuStream, state_time: Array, max_gap_s: float = 0.05,
+                  source: str = "imu") -> InertialData:
+    """:class:`InertialData` of ``imu`` at board states at ``state_time`` (s, sorted, the
+    IMU's clock). InputError naming ``source`` if the stream has no gyro or no sample near
+    any state."""
+    if imu.gyro_rad_s is None:
+        raise InputError("the IMU stream has no gyro columns (gx, gy, gz): the graph's IMU "
+                         "factors need both the accelerometer and the gyro", source)
+    t = imu.time
+    rate, rate_ok = _interpolated(t, imu.gyro_rad_s, state_time, max_gap_s)
+    dt = np.diff(state_time)
+    middle = state_time[:-1] + dt / 2
+    force_mid, force_ok = _interpolated(t, imu.accel_mps2, middle, max_gap_s)
+    rate_mid, _ = _interpolated(t, imu.gyro_rad_s, middle, max_gap_s)
+    # the frame at the middle seen from state k's: R_k^T R_mid = Exp(omega dt / 2)
+    force = np.einsum("kij,kj->ki", so3_exp(rate_mid * (dt / 2)[:, None]), force_mid)
+    if not rate_ok.any():
+        raise InputError(f"no IMU sample within {max_gap_s * 1e3:.0f} ms of any board state "
+                         f"(IMU {t[0]:.3f}-{t[-1]:.3f} s, light {state_time[0]:.3f}-"
+                         f"{state_time[-1]:.3f} s): not on the light's clock?", source)
+    return InertialData(rate, rate_ok, force, force_ok & (dt > 0), dt)
+
+
+def initial_gravity(data: InertialData, T_world_board: Array) -> Array:
+    """Gravity vector (m/s^2, world frame) from the specific force carried into the world by
+    the initial poses ``T_world_board`` (K, 4, 4): over a capture whose receiver ends about
+    where it started moving, the mean acceleration is small, so gravity is minus the mean
+    world-frame specific force, scaled to standard gravity."""
+    R = T_world_board[:-1, :3, :3][data.force_ok]
+    mean = np.einsum("kij,kj->i", R, data.force[data.force_ok]) / max(len(R), 1)
+    norm = float(np.linalg.norm(mean))
+    if norm < 1e-6:
+        return np.array([0.0, 0.0, -STANDARD_GRAVITY])
+    return -mean / norm * STANDARD_GRAVITY
+
+
+def start_with_imu(init: Initialisation, data: InertialData) -> tuple[Initialisation, Array]:
+    """The initialisation with the gyro's angular rates as the states' (where it has them),
+    and the initial gravity (:func:`initial_gravity`)."""
+    V = init.V.copy()
+    V[data.rate_ok, :3] = data.rate[data.rate_ok]
+    return replace(init, V=V), initial_gravity(data, init.X)
