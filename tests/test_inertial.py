@@ -25,9 +25,10 @@ from lhgraph.estimation.residuals import accel_residuals, gyro_residuals
 from lhgraph.geometry.transforms import rotation_angle, se3_exp, so3_exp
 from lhgraph.importers.crazyflie import import_crazyflie
 from lhgraph.io.angles import load_angles
-from lhgraph.io.imu import ImuStream, load_imu
+from lhgraph.io.imu import ImuStream, load_imu, save_imu
 from lhgraph.io.stations import load_stations, save_stations
 from lhgraph.model.boards import crazyflie_deck
+from lhgraph.model.calibration import StationCalibration, save_calibration
 from lhgraph.sim.imu import simulate_imu
 from lhgraph.sim.simulate import load_simulation_config, simulate, write_simulation
 from lhgraph.workflow.inputs import station_models
@@ -132,10 +133,7 @@ def test_cli_track_imu(tmp_path, capsys, deck_with_imu):
     sim = simulate(short, 4)
     write_simulation(sim, tmp_path / "sim")
     save_stations(sim.truth, tmp_path / "stations.toml")
-    stream = simulate_imu(sim, seed=2).stream
-    rows = np.column_stack([stream.time, stream.accel_mps2, stream.gyro_rad_s])
-    (tmp_path / "imu.csv").write_text("time,ax,ay,az,gx,gy,gz\n" + "\n".join(
-        ",".join(f"{x:.9g}" for x in r) for r in rows) + "\n")
+    save_imu(simulate_imu(sim, seed=2).stream, tmp_path / "imu.csv")
     common = ["track", "--stations", str(tmp_path / "stations.toml"), "--board",
               "crazyflie_deck", "--angles", str(tmp_path / "sim" / "angles.csv"), "--imu",
               str(tmp_path / "imu.csv")]
@@ -144,6 +142,32 @@ def test_cli_track_imu(tmp_path, capsys, deck_with_imu):
     assert main([*common, "--output", str(tmp_path / "s.csv"), "--streaming"]) == 2
     assert "batch only" in capsys.readouterr().err
     assert not (tmp_path / "s.csv").exists()
+
+
+def test_solve_with_imu(tmp_path, capsys, deck_with_imu):
+    # the calibration refined with the IMU (CLI flag and config key); the paper's method
+    # has no use for an IMU: one line, exit 2
+    capture, imu = deck_with_imu
+    write_simulation(capture, tmp_path / "sim")
+    save_imu(imu.stream, tmp_path / "imu.csv")
+    save_calibration({k: StationCalibration(s.model.calibration)
+                      for k, s in capture.truth.stations.items()}, tmp_path / "ootx.toml")
+    out = tmp_path / "st.toml"
+    args = ["solve", "--board", str(tmp_path / "sim" / "board.toml"), "--angles",
+            str(tmp_path / "sim" / "angles.csv"), "--calibration", str(tmp_path / "ootx.toml"),
+            "--imu", str(tmp_path / "imu.csv")]
+    assert main([*args, "--output", str(out), "--quiet"]) == 0
+    solved = load_stations(out)
+    truth = capture.truth
+    T = np.linalg.inv(truth.pose(0)) @ truth.pose(1)
+    assert np.linalg.norm(solved.pose(1)[:3, 3] - T[:3, 3]) < 0.01
+    assert main([*args, "--output", str(tmp_path / "p.toml"), "--method", "paper"]) == 2
+    assert "does not use an IMU" in capsys.readouterr().err
+    (tmp_path / "solve.toml").write_text(
+        'board = "sim/board.toml"\nangles = "sim/angles.csv"\nimu = "imu.csv"\n'
+        'calibration = "ootx.toml"\noutput = "c.toml"\n')
+    assert main(["solve", str(tmp_path / "solve.toml"), "--quiet"]) == 0
+    assert (tmp_path / "c.toml").is_file()
 
 
 LH1_LOG = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")

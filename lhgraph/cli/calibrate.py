@@ -68,6 +68,8 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--world", choices=WORLDS,
                    help="world frame: the reference station's (default) or gravity-aligned, "
                    "z up from the stations' OOTX accelerometer vectors")
+    p.add_argument("--imu", help="the receiver's imu.csv (board frame, the angles' clock): "
+                   "refine the graph's solution with IMU factors (docs/solve.md)")
     p.add_argument("--resume", action="store_true",
                    help="run directory: keep the methods that finished before with the same "
                    "inputs and options, compute the rest")
@@ -89,7 +91,7 @@ def run_solve(args: argparse.Namespace) -> int:
 
     flags = {f"--{name}": (name, getattr(args, name))
              for name in ("output", "method", "trajectory", "calibration", "truth", "reference",
-                          "world")}
+                          "world", "imu")}
     flags["--duration"] = ("duration_s", args.duration)
     if args.config:
         config = load_solve_config(args.config)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from lhgraph.errors import InputError
-from lhgraph.io.files import read_csv_columns
+from lhgraph.io.files import read_csv_columns, write_csv_columns
 
 IMU_COLUMNS = tuple((name, float) for name in ("time", "ax", "ay", "az"))
 GYRO_COLUMNS = ("gx", "gy", "gz")
@@ -35,3 +35,12 @@ def load_imu(path: str | Path) -> ImuStream:
     gyro = (np.stack([c[k] for k in GYRO_COLUMNS], axis=1)
             if all(k in c for k in GYRO_COLUMNS) else None)
     return ImuStream(c["time"], accel, gyro)
+
+
+def save_imu(stream: ImuStream, path: str | Path, overwrite: bool = False) -> Path:
+    """Write ``stream`` as an ``imu.csv`` (the gyro columns only when it has a gyro)."""
+    columns = {"time": stream.time}
+    columns |= {f"a{k}": stream.accel_mps2[:, i] for i, k in enumerate("xyz")}
+    if stream.gyro_rad_s is not None:
+        columns |= {f"g{k}": stream.gyro_rad_s[:, i] for i, k in enumerate("xyz")}
+    return write_csv_columns(path, columns, {"time": "{:.6f}"}, overwrite)

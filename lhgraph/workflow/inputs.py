@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from lhgraph.errors import InputError
 from lhgraph.estimation.gravity import up_vectors
 from lhgraph.io.angles import Angles, load_angles
+from lhgraph.io.imu import ImuStream, load_imu
 from lhgraph.model.board import Board, load_board
 from lhgraph.model.calibration import StationCalibration, load_calibration
 from lhgraph.model.lh1 import Convention, StationModel
@@ -47,12 +48,13 @@ class SolveInputs:
     models: dict[int, StationModel]
     notes: list[str] = field(default_factory=list)
     world_up: dict[int, NDArray[np.float64]] | None = None
+    imu: ImuStream | None = None
 
 
 def check_inputs(config: SolveConfig) -> None:
     """InputError unless every input file the config names exists and is a file (run before
     any output is created, so a bad input leaves nothing behind)."""
-    for name in ("board", "angles", "capture", "calibration", "truth"):
+    for name in ("board", "angles", "capture", "calibration", "truth", "imu"):
         path = getattr(config, name)
         if path is None:
             continue
@@ -96,4 +98,5 @@ def load_inputs(config: SolveConfig) -> SolveInputs:
             raise InputError("world = 'gravity' needs the stations' accelerometer vectors "
                              "(accel_dir in an ootx.toml, or a capture's OOTX): none given",
                              config.calibration or config.capture or config.path, "world")
-    return SolveInputs(board, angles, models_of(calibrations), notes, world_up)
+    imu = None if config.imu is None else load_imu(config.imu)
+    return SolveInputs(board, angles, models_of(calibrations), notes, world_up, imu)

@@ -95,10 +95,11 @@ def versions() -> dict[str, str]:
 
 
 def input_files(config: SolveConfig) -> dict[str, Path]:
-    """The input files a config names (config, board, angles or capture, calibration, truth)."""
+    """The input files a config names (config, board, angles or capture, calibration, truth,
+    imu)."""
     named = {"config": config.path, "board": config.board, "angles": config.angles,
              "capture": config.capture, "calibration": config.calibration,
-             "truth": config.truth}
+             "truth": config.truth, "imu": config.imu}
     return {k: Path(v) for k, v in named.items() if v is not None}
 
 
@@ -350,7 +351,7 @@ def _run_method(config: SolveConfig, inputs: SolveInputs, method: str, folder: P
     say(f"[{method}] solving")
     result = solve(inputs.board, inputs.angles, method, inputs.models, config.reference,
                    config.graph, lambda msg: say(f"[{method}] {msg}"),
-                   world_up=inputs.world_up)
+                   world_up=inputs.world_up, imu=inputs.imu)
     errors = station_errors(truth, result.stations) if truth is not None else None
     summary = summarise(config, inputs, result, errors, hashes, load_s)
     files.append(save_stations(result.stations, folder / "stations.toml", overwrite))

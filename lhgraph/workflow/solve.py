@@ -26,6 +26,7 @@ from lhgraph.estimation.metrics import PoseError, station_errors
 from lhgraph.estimation.result import SolveResult
 from lhgraph.io.angles import Angles
 from lhgraph.io.files import check_writable
+from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
 from lhgraph.model.board import Board
@@ -42,8 +43,12 @@ def solve(board: Board, angles: Angles, method: str = "graph",
           graph_options: GraphOptions | None = None,
           progress: Callable[[str], None] | None = None,
           paper_options: PaperOptions | None = None,
-          world_up: dict[int, NDArray[np.float64]] | None = None) -> SolveResult:
+          world_up: dict[int, NDArray[np.float64]] | None = None,
+          imu: ImuStream | None = None) -> SolveResult:
     """Calibrate the stations seen in ``angles`` with ``method`` ("graph" or "paper").
+
+    ``imu``: the receiver's IMU stream, for the graph's IMU refinement (the paper's method
+    has no use for it: InputError).
 
     The world is the reference station's frame, or with ``world_up`` (station index -> up
     vector in the station frame, :func:`lhgraph.estimation.gravity.up_vectors`) gravity-aligned.
@@ -54,8 +59,11 @@ def solve(board: Board, angles: Angles, method: str = "graph",
         options = graph_options or GraphOptions()
         if reference is not None:
             options = dataclasses.replace(options, reference=reference)
-        result = solve_graph(board, angles, models, options, progress)
+        result = solve_graph(board, angles, models, options, progress, imu=imu)
     elif method == "paper":
+        if imu is not None:
+            raise InputError("the paper's method does not use an IMU: drop 'imu' (--imu) or "
+                             "solve with the graph", where="imu")
         from lhgraph.estimation.baseline import solve_paper
 
         staged = None if progress is None else (
@@ -81,7 +89,8 @@ def run_config(config: SolveConfig, progress: Callable[[str], None] | None = Non
     """Load the inputs a config names and solve with its (first) method."""
     inputs = load_inputs(config)
     return solve(inputs.board, inputs.angles, config.method_list()[0], inputs.models,
-                 config.reference, config.graph, progress, world_up=inputs.world_up)
+                 config.reference, config.graph, progress, world_up=inputs.world_up,
+                 imu=inputs.imu)
 
 
 def solve_to_files(config: SolveConfig, overwrite: bool = False,

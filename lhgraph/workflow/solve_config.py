@@ -27,7 +27,9 @@ class SolveConfig:
     in a run directory's summary; ``path`` is the configuration file itself; ``duration_s``
     (old spelling ``duration``) keeps only that many seconds from the moment the board starts
     moving; ``world`` is ``"reference"`` (the reference station's frame) or ``"gravity"``
-    (z up from the stations' OOTX accelerometer vectors, :mod:`lhgraph.estimation.gravity`).
+    (z up from the stations' OOTX accelerometer vectors, :mod:`lhgraph.estimation.gravity`);
+    ``imu`` the receiver's ``imu.csv`` (board frame, the angles' clock): the graph refines its
+    solution with IMU factors (:func:`lhgraph.estimation.graph.solver.solve_graph`).
     """
 
     board: Path = option(kind=Path)
@@ -45,6 +47,7 @@ class SolveConfig:
     path: Path | None = None
     duration_s: float | None = option(None, kind=float, gt=0, alias="duration")
     world: str = option("reference", choices=WORLDS)
+    imu: Path | None = option(None, kind=Path)
 
     def __post_init__(self) -> None:
         check_fields(self)

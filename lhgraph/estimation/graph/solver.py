@@ -27,10 +27,10 @@ from lhgraph.estimation.graph.optimizer import (
 )
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import STATION_POSE, initial_values
-from lhgraph.estimation.inertial import inertial_data, start_with_imu
+from lhgraph.estimation.inertial import InertialData, inertial_data, initial_gravity
 from lhgraph.estimation.init import Initialiser
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
-from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
+from lhgraph.estimation.init.pnp_kabsch import Initialisation, PnPKabschInitialiser
 from lhgraph.estimation.problem import GraphProblem, build_problem
 from lhgraph.estimation.result import Residuals, SolveResult
 from lhgraph.estimation.sweep_times import co_logged_stations, retime_cycles
@@ -63,8 +63,11 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     of a receiver that logs a station's two sweeps together, are first put on each station's
     rotor grid, one board state per rotor cycle (``options.sweep_times``,
     :func:`retime_cycles`). ``imu``: the receiver's IMU stream (board frame, the angles'
-    clock): gyro and accelerometer factors join the graph (:mod:`lhgraph.estimation.inertial`)
-    and the IMU bias and the world's gravity are estimated with the stations.
+    clock): the light-only solution is refined by a second optimisation with gyro and
+    accelerometer factors (:mod:`lhgraph.estimation.inertial`), the IMU bias and the world's
+    gravity estimated with the stations (started from the initialiser instead, the IMU
+    factors hold states in their mirror poses: on the Crazyflie log that solve did not
+    converge in 60 iterations).
     """
     options = options or GraphOptions()
     models = models or {}
@@ -77,29 +80,47 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     angles, options, few = few_diode_preparation(angles, options, progress)
-    params = LMParams.from_options(options)
     problem = build_problem(board, angles, models, reference)
     if initialiser is None:
         initialiser = FewDiodeInitialiser() if few else PnPKabschInitialiser()
     init = initialiser(board, angles, problem)
-    inertial = gravity = None
-    if imu is not None:
-        inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
-        init, gravity = start_with_imu(init, inertial)
     timings["initialise"] = time.perf_counter() - t0
     if progress:
-        progress(f"initialised {problem.n_states} board states, {len(problem.hits.angle)} hits"
-                 + ("" if inertial is None else
-                    f"; IMU factors at {int(inertial.rate_ok.sum())} states"))
+        progress(f"initialised {problem.n_states} board states, {len(problem.hits.angle)} hits")
     t1 = time.perf_counter()
+    fit, ev, cov = _optimise(problem, options, init, progress)
+    if imu is not None:
+        inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
+        refined = Initialisation(ev.station_poses().copy(), ev.board_poses().copy(),
+                                 ev.board_twists().copy())
+        if progress:
+            progress(f"refining with the IMU: gyro and accelerometer factors at "
+                     f"{int(inertial.rate_ok.sum())} states")
+        light = fit
+        fit, ev, cov = _optimise(problem, options, refined, progress, inertial,
+                                 initial_gravity(inertial, refined.X))
+        fit = replace(fit, iterations=light.iterations + fit.iterations,
+                      error_history=light.error_history + fit.error_history)
+    timings["optimise"] = time.perf_counter() - t1
+    ev.evaluate(fit.values)
+    return _result(angles, problem, ev, fit, cov, options, timings, t0)
+
+
+def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation,
+              progress: Progress | None, inertial: InertialData | None = None,
+              gravity: Array | None = None
+              ) -> tuple[OptimizerResult, FactorEvaluator, dict[int, Array]]:
+    """The graph of ``problem`` (with IMU factors if ``inertial``) optimised from ``init``
+    (and ``gravity``): the optimiser's result, the evaluator and the stations' marginal
+    covariances by slot."""
     graph, ev = build_graph(problem, options, inertial=inertial)
     values = initial_values(ev.layout, init, gravity)
     try:
         if options.solver == "lm":
             hook = (NoiseAdaptation(ev, options, progress) if NoiseAdaptation.enabled(options)
                     else None)
-            fit = levenberg_marquardt(graph, values, ev.cost, ev.layout, params, hook,
-                                      progress)
+            fit = levenberg_marquardt(graph, values, ev.cost, ev.layout,
+                                      LMParams.from_options(options), hook, progress)
         else:
             fit = isam2_batch(graph, values, ev.layout, options.max_iterations, progress)
         cov = {slot: fit.covariance(STATION_POSE.key(slot))
@@ -108,9 +129,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         first = next((line.strip() for line in str(err).splitlines() if line.strip()), "")
         raise SolverError(f"the linearised problem cannot be solved ({first}): some board "
                           "state or station is not determined by the data") from err
-    timings["optimise"] = time.perf_counter() - t1
-    ev.evaluate(fit.values)
-    return _result(angles, problem, ev, fit, cov, options, timings, t0)
+    return fit, ev, cov
 
 
 def few_diode_preparation(angles: Angles, options: GraphOptions,
