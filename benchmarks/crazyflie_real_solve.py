@@ -5,17 +5,19 @@
         [--output docs/results/crazyflie_real_solve.md]
 
 1. ``lhgraph import crazyflie`` of the shared log (or ``--import-dir``, its output).
-2. ``lhgraph solve`` (graph, the deck, the log's ``ootx.toml``) twice:
+2. ``lhgraph solve`` (graph, the deck, the log's ``ootx.toml``) three times:
    - *hit times*: the importer's ``time`` column (the log stamp moved back to the moment the
      laser crossed the diode, from the deck's slot timing: docs/crazyflie.md);
    - *log stamps*: the same hits with the log's own stamps (``log_time``, sorted) as times,
      which the solver recognises as co-logged sweeps. Both are put on each station's fitted
      rotor grid, one board state per rotor cycle (:mod:`lhgraph.estimation.sweep_times`),
      so the two rows differ only by the log's common delay: a check of the importer's hit
-     times, not a file the contract allows as such (its ``time`` is not the hit time).
+     times, not a file the contract allows as such (its ``time`` is not the hit time);
+   - *hit times, IMU*: the hit times with the deck's ``imu.csv`` (``--imu``: the light-only
+     solution refined with IMU factors).
 3. ``lhgraph track`` of the log through cfclient's geometry and through ours (hit times),
-   each without and with the deck's IMU (``--imu imu.csv``), two at a time in parallel
-   processes (wall time of each in the table).
+   each without and with the deck's IMU (``--imu imu.csv``), and through ours calibrated
+   with the IMU, with it; two at a time in parallel processes (wall time of each).
 4. ``benchmarks/crazyflie_evaluation.py``: (b) for cfclient's geometry and both of ours, (a)
    for the four tracks; the ratio of medians ours (hit times) / cfclient's for (b), for (a)
    without the IMU and for (a) with it on both sides (issue #14's target: <= 0.6).
@@ -102,12 +104,14 @@ def main() -> int:
     save_angles(with_log_stamps(load_angles(imp / "angles.csv")), work / "angles-stamps.csv",
                 overwrite=True)
     rows, geometries = [], [f"cfclient={imp / 'stations-cfclient.toml'}"]
-    for name, angles in (("hit times", imp / "angles.csv"),
-                         ("log stamps", work / "angles-stamps.csv")):
-        out = work / f"stations-{name.replace(' ', '-')}.toml"
+    imu = ["--imu", str(imp / "imu.csv")]
+    for name, angles, extra in (("hit times", imp / "angles.csv", []),
+                                ("log stamps", work / "angles-stamps.csv", []),
+                                ("hit times, IMU", imp / "angles.csv", imu)):
+        out = work / f"stations-{name.replace(' ', '-').replace(',', '')}.toml"
         text, seconds = lhgraph("solve", "--board", str(imp / "board.toml"), "--angles",
                                 str(angles), "--calibration", str(imp / "ootx.toml"),
-                                "--output", str(out), "--force", "--verbose")
+                                "--output", str(out), "--force", "--verbose", *extra)
         st = load_stations(out)
         T_0_1 = np.linalg.inv(st.pose(0)) @ st.pose(1)
         its = [ln for ln in text.splitlines() if ln.strip().startswith("iteration")]
@@ -117,9 +121,9 @@ def main() -> int:
         geometries.append(f"ours ({name})={out}")
     tracks = {"cfclient": (imp / "stations-cfclient.toml", []),
               "ours (hit times)": (work / "stations-hit-times.toml", []),
-              "cfclient + IMU": (imp / "stations-cfclient.toml", ["--imu", str(imp / "imu.csv")]),
-              "ours (hit times) + IMU": (work / "stations-hit-times.toml",
-                                         ["--imu", str(imp / "imu.csv")])}
+              "cfclient + IMU": (imp / "stations-cfclient.toml", imu),
+              "ours (hit times) + IMU": (work / "stations-hit-times.toml", imu),
+              "ours (hit times, IMU) + IMU": (work / "stations-hit-times-IMU.toml", imu)}
     track_s = run_tracks(tracks, imp, work)
     evaluation = work / "evaluation.md"
     subprocess.run([sys.executable, str(ROOT / "benchmarks/crazyflie_evaluation.py"),
@@ -134,14 +138,17 @@ def main() -> int:
               for part, lines_ in (("b", table[2:2 + len(geometries)]),
                                    ("a", table[4 + len(geometries):]))
               for line in lines_}
-    ratios = [f"- measure ({m}){how}: median {median[(m, ours)]:.1f} mm with ours (hit times) "
+    ratios = [f"- measure ({m}){how}: median {median[(m, ours)]:.1f} mm with {ours} "
               f"against {median[(m, theirs)]:.1f} mm with cfclient's: ratio "
               f"**{median[(m, ours)] / median[(m, theirs)]:.2f}** (target <= 0.6)"
               for m, how, ours, theirs in (
                   ("b", "", "ours (hit times)", "cfclient"),
                   ("a", "", "ours (hit times)", "cfclient"),
                   ("a", ", both tracks with the IMU", "ours (hit times) + IMU",
-                   "cfclient + IMU"))]
+                   "cfclient + IMU"),
+                  ("b", ", ours calibrated with the IMU", "ours (hit times, IMU)", "cfclient"),
+                  ("a", ", ours calibrated with the IMU, both tracks with it",
+                   "ours (hit times, IMU) + IMU", "cfclient + IMU"))]
     track_rows = [f"- `lhgraph track` through {name}'s geometry: {s:.0f} s (two tracks in "
                   "parallel on the machine's cores)" for name, s in track_s.items()]
     lines = ["# The shared Crazyflie LH1 log calibrated by lhgraph", "",

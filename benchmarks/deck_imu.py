@@ -1,0 +1,132 @@
+"""Simulated Crazyflie deck logs with and without the deck's IMU (issue #16's deck figure).
+
+    python benchmarks/deck_imu.py [--seeds 10] [--jobs 2] [--output docs/results/deck_imu.md]
+        [--force]
+
+Per seed of ``configs/simulation/deck.toml`` (120 s, two LH1 stations, hand-held motion, the
+real log's character), with a simulated 100 Hz IMU (``lhgraph.sim.imu``: white noise and a
+constant bias, no scale error):
+
+1. calibration: ``solve_graph`` without and with ``imu=`` (the light-only solution refined
+   with the IMU factors): station 1's position and rotation error relative to station 0,
+   the NEES of its 6x6 covariance (expected 6), and the solve time;
+2. tracking through the true stations: ``track`` without and with ``imu=``: the path's
+   median position and rotation error against the simulated truth.
+
+Figures: medians over the seeds and the ratio with / without (issue #16's target for the
+deck: <= 0.6).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import platform  # noqa: E402
+import shlex  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+from joblib import Parallel, delayed  # noqa: E402
+
+from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
+from lhgraph.estimation.graph.track import track  # noqa: E402
+from lhgraph.geometry.transforms import inverse, rotation_angle, se3_log  # noqa: E402
+from lhgraph.io.files import check_writable  # noqa: E402
+from lhgraph.sim.imu import simulate_imu  # noqa: E402
+from lhgraph.sim.simulate import load_simulation_config, simulate  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+CONFIG = ROOT / "configs/simulation/deck.toml"
+
+
+def station_figures(sim, result) -> dict:
+    """Station 1's position (mm) and rotation (deg) error, NEES and sigma (mm)."""
+    T_true = sim.truth.relative_to_reference().pose(1)
+    est = result.stations.relative_to_reference()
+    T_est = est.pose(1)
+    xi = se3_log(inverse(T_true) @ T_est)
+    return {"pos_mm": float(np.linalg.norm(T_est[:3, 3] - T_true[:3, 3]) * 1e3),
+            "rot_deg": float(np.degrees(rotation_angle(T_true[:3, :3].T @ T_est[:3, :3]))),
+            "nees": float(xi @ np.linalg.solve(est.stations[1].covariance, xi))}
+
+
+def path_figures(sim, path) -> tuple[float, float]:
+    """Median position (mm) and rotation (deg) error of a tracked path against the truth."""
+    truth = sim.trajectory.at(path.trajectory.time)
+    est = path.trajectory.T_world_board
+    pos = np.linalg.norm(est[:, :3, 3] - truth[:, :3, 3], axis=1)
+    rot = rotation_angle(np.einsum("kji,kjl->kil", truth[:, :3, :3], est[:, :3, :3]))
+    return float(np.median(pos) * 1e3), float(np.degrees(np.median(rot)))
+
+
+def run_one(seed: int) -> dict:
+    sim = simulate(load_simulation_config(CONFIG), seed)
+    imu = simulate_imu(sim, seed=seed).stream
+    models = {k: s.model for k, s in sim.truth.stations.items()}
+    row: dict = {"seed": seed}
+    for tag, stream in (("light", None), ("imu", imu)):
+        tic = time.perf_counter()
+        result = solve_graph(sim.board, sim.angles, models, imu=stream)
+        row[f"{tag}_s"] = time.perf_counter() - tic
+        row |= {f"{tag}_{k}": v for k, v in station_figures(sim, result).items()}
+        row[f"{tag}_iterations"] = result.iterations
+        tracked = track(sim.board, sim.angles, sim.truth, models, imu=stream)
+        row[f"{tag}_path_mm"], row[f"{tag}_path_deg"] = path_figures(sim, tracked.path)
+    return row
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--output", default=str(ROOT / "docs/results/deck_imu.md"))
+    parser.add_argument("--force", action="store_true")
+    args = parser.parse_args()
+    out = check_writable(args.output, args.force)
+    rows = Parallel(n_jobs=args.jobs)(delayed(run_one)(s) for s in range(1, args.seeds + 1))
+
+    def med(key: str) -> float:
+        return float(np.median([r[key] for r in rows]))
+
+    lines = ["# Simulated deck logs with and without the IMU", "",
+             f"Command: `python benchmarks/deck_imu.py {shlex.join(sys.argv[1:])}`  ",
+             f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+             f"Python {platform.python_version()}; {time.strftime('%Y-%m-%d')}  ",
+             f"Config: `configs/simulation/deck.toml` (120 s), seeds 1-{args.seeds}; IMU: "
+             "`lhgraph.sim.imu` defaults (100 Hz)", "",
+             "## Medians over the seeds", "",
+             "| figure | light only | with the IMU | ratio |", "|---|---|---|---|"]
+    for label, key in (("station 1 position error (mm)", "pos_mm"),
+                       ("station 1 rotation error (deg)", "rot_deg"),
+                       ("station 1 NEES (6 dof)", "nees"),
+                       ("path through the true stations, position (mm)", "path_mm"),
+                       ("path through the true stations, rotation (deg)", "path_deg"),
+                       ("solve_graph time (s)", "s")):
+        a, b = med(f"light_{key}"), med(f"imu_{key}")
+        lines.append(f"| {label} | {a:.3f} | {b:.3f} | {b / a:.2f} |")
+    lines += ["", "Issue #16's target for the deck: median station error with the IMU <= 0.6x "
+              "without.", "", "## Per seed", "",
+              "| seed | pos mm light / IMU | rot deg light / IMU | NEES light / IMU | "
+              "path mm light / IMU | path deg light / IMU | iterations light / IMU |",
+              "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['seed']} | {r['light_pos_mm']:.2f} / {r['imu_pos_mm']:.2f} | "
+              f"{r['light_rot_deg']:.3f} / {r['imu_rot_deg']:.3f} | "
+              f"{r['light_nees']:.1f} / {r['imu_nees']:.1f} | "
+              f"{r['light_path_mm']:.3f} / {r['imu_path_mm']:.3f} | "
+              f"{r['light_path_deg']:.3f} / {r['imu_path_deg']:.3f} | "
+              f"{r['light_iterations']} / {r['imu_iterations']} |" for r in rows]
+    lines.append("")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text("\n".join(lines))
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
