@@ -32,6 +32,7 @@ from lhgraph.model.calibration import StationCalibration, save_calibration
 from lhgraph.sim.imu import simulate_imu
 from lhgraph.sim.simulate import load_simulation_config, simulate, write_simulation
 from lhgraph.workflow.inputs import station_models
+from lhgraph.workflow.solve import solve
 
 
 @pytest.fixture(scope="module")
@@ -168,6 +169,26 @@ def test_solve_with_imu(tmp_path, capsys, deck_with_imu):
         'calibration = "ootx.toml"\noutput = "c.toml"\n')
     assert main(["solve", str(tmp_path / "solve.toml"), "--quiet"]) == 0
     assert (tmp_path / "c.toml").is_file()
+
+
+def test_world_gravity_from_the_imu(tmp_path, deck_with_imu):
+    # --world gravity with --imu: +z is the up the IMU observed (the simulated truth's), and
+    # with the stations' OOTX vectors too the angle between the two ups is reported
+    capture, imu = deck_with_imu
+    models = {k: s.model for k, s in capture.truth.stations.items()}
+    up0 = np.asarray(capture.truth.extra["simulation"]["up"])  # station 0 = the sim's world
+    result = solve(capture.board, capture.angles, models=models, world_up={},
+                   imu=imu.stream)
+    R0 = result.stations.pose(0)[:3, :3]  # station 0 in the gravity world
+    assert np.degrees(np.arccos(np.clip((R0 @ up0)[2], -1, 1))) < 1.0
+    assert result.stations.extra["world"] == "gravity"
+    assert result.gravity_world[2] < -9.0
+    ootx_up = {k: np.linalg.inv(capture.truth.pose(k))[:3, :3] @ up0 for k in (0, 1)}
+    both = solve(capture.board, capture.angles, models=models, world_up=ootx_up,
+                 imu=imu.stream)
+    assert both.diagnostics["imu_ootx_up_deg"] < 1.0
+    with pytest.raises(InputError, match="--imu"):
+        solve(capture.board, capture.angles, models=models, world_up={})
 
 
 LH1_LOG = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")

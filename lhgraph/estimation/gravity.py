@@ -13,7 +13,10 @@ this one matches libsurvive's own station frames.
 
 The gravity world keeps the reference station's origin; its +z is up (the mean of the
 stations' up vectors, carried into the world by their solved rotations) and its +x is the
-reference station's forward axis made horizontal.
+reference station's forward axis made horizontal. A solve with the receiver's IMU
+(``SolveResult.gravity_world``) observes up itself: :func:`imu_up` turns it into an up
+vector of the reference station, and :func:`up_angle_deg` says how far it is from the
+stations' OOTX vectors.
 """
 
 from __future__ import annotations
@@ -59,18 +62,42 @@ def up_vectors(calibrations: dict[int, StationCalibration]) -> dict[int, Array]:
             if np.any(c.accel_dir)}
 
 
+def imu_up(result: SolveResult) -> dict[int, Array]:
+    """The up direction the receiver's IMU observed (``result.gravity_world``), as the
+    reference station's up vector in its station frame (the form :func:`to_gravity_world`
+    takes)."""
+    if result.gravity_world is None:
+        raise InputError("the solve has no IMU gravity estimate")
+    up_world = -result.gravity_world / np.linalg.norm(result.gravity_world)
+    ref = result.stations.reference
+    return {ref: result.stations.pose(ref)[:3, :3].T @ up_world}
+
+
+def world_up(stations: Stations, up: dict[int, Array]) -> tuple[Array, float]:
+    """The mean up direction (unit, world of ``stations``) of the stations' up vectors ``up``
+    and the largest angle (deg) between one of them and the mean."""
+    used = [k for k in stations.indices() if k in up]
+    if not used:
+        raise InputError("no accelerometer vector (OOTX accel_dir) for any solved station: "
+                         "a gravity-aligned world needs the stations' factory calibration "
+                         "or the receiver's IMU (--imu)")
+    in_world = np.array([stations.pose(k)[:3, :3] @ up[k] for k in used])
+    z = in_world.sum(axis=0)
+    z /= np.linalg.norm(z)
+    return z, float(np.degrees(np.max(np.arccos(np.clip(in_world @ z, -1.0, 1.0)))))
+
+
+def up_angle_deg(stations: Stations, a: dict[int, Array], b: dict[int, Array]) -> float:
+    """Angle (deg) between the mean up directions of two sets of up vectors."""
+    za, zb = world_up(stations, a)[0], world_up(stations, b)[0]
+    return float(np.degrees(np.arccos(np.clip(za @ zb, -1.0, 1.0))))
+
+
 def gravity_rotation(stations: Stations, up: dict[int, Array]) -> tuple[Array, float]:
     """``T_gravity_world`` (4x4, a rotation about the world origin) and the largest angle
     (deg) between one station's up vector and their mean, both in the world of ``stations``.
     """
-    used = [k for k in stations.indices() if k in up]
-    if not used:
-        raise InputError("no accelerometer vector (OOTX accel_dir) for any solved station: "
-                         "a gravity-aligned world needs the stations' factory calibration")
-    in_world = np.array([stations.pose(k)[:3, :3] @ up[k] for k in used])
-    z = in_world.sum(axis=0)
-    z /= np.linalg.norm(z)
-    spread = float(np.degrees(np.max(np.arccos(np.clip(in_world @ z, -1.0, 1.0)))))
+    z, spread = world_up(stations, up)
     R_ref = stations.pose(stations.reference)[:3, :3]
     for axis in (R_ref[:, 0], R_ref[:, 2]):  # forward; up if it looks straight up or down
         x = axis - (axis @ z) * z
@@ -104,6 +131,8 @@ def to_gravity_world(result: SolveResult, up: dict[int, Array]) -> SolveResult:
         warnings.append(f"the stations' accelerometer vectors disagree by up to {spread:.1f} "
                         "deg with the solved rotations (a station moved, or its OOTX is "
                         "stale): the gravity alignment is uncertain by that much")
+    gravity = (None if result.gravity_world is None
+               else T[:3, :3] @ result.gravity_world)
     return dataclasses.replace(result, stations=stations, trajectory=trajectory,
-                               warnings=warnings,
+                               warnings=warnings, gravity_world=gravity,
                                diagnostics={**result.diagnostics, "gravity_spread_deg": spread})

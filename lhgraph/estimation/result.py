@@ -54,3 +54,5 @@ class SolveResult:
     error_history: list[float] = field(default_factory=list)
     """Graph error (0.5 * sum of whitened squared residuals) at the initial values and after
     each optimiser iteration; empty for methods without such a loop."""
+    gravity_world: NDArray[np.float64] | None = None
+    """With an IMU: the gravity vector (m/s^2, pointing down) in the result's world."""

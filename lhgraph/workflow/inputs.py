@@ -94,9 +94,10 @@ def load_inputs(config: SolveConfig) -> SolveInputs:
     world_up = None
     if config.world == "gravity":
         world_up = up_vectors(calibrations)
-        if not world_up:
+        if not world_up and config.imu is None:
             raise InputError("world = 'gravity' needs the stations' accelerometer vectors "
-                             "(accel_dir in an ootx.toml, or a capture's OOTX): none given",
+                             "(accel_dir in an ootx.toml, or a capture's OOTX) or the "
+                             "receiver's IMU (imu, --imu): none given",
                              config.calibration or config.capture or config.path, "world")
     imu = None if config.imu is None else load_imu(config.imu)
     return SolveInputs(board, angles, models_of(calibrations), notes, world_up, imu)

@@ -21,7 +21,7 @@ from lhgraph.choices import METHODS
 from lhgraph.errors import InputError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
-from lhgraph.estimation.gravity import to_gravity_world
+from lhgraph.estimation.gravity import imu_up, to_gravity_world, up_angle_deg
 from lhgraph.estimation.metrics import PoseError, station_errors
 from lhgraph.estimation.result import SolveResult
 from lhgraph.io.angles import Angles
@@ -51,7 +51,10 @@ def solve(board: Board, angles: Angles, method: str = "graph",
     has no use for it: InputError).
 
     The world is the reference station's frame, or with ``world_up`` (station index -> up
-    vector in the station frame, :func:`lhgraph.estimation.gravity.up_vectors`) gravity-aligned.
+    vector in the station frame, :func:`lhgraph.estimation.gravity.up_vectors`) gravity-aligned:
+    by the receiver's IMU when the solve has one (``imu``; then ``world_up`` may be empty,
+    and where it is not, ``diagnostics["imu_ootx_up_deg"]`` is the angle between the two
+    ups), else by the stations' OOTX vectors.
     ``reference`` overrides ``graph_options.reference`` (the caller's options are not changed).
     """
     angles.check_board(board)
@@ -72,7 +75,17 @@ def solve(board: Board, angles: Angles, method: str = "graph",
     else:
         raise InputError(f"unknown method '{method}' (expected one of {', '.join(METHODS)})",
                          where="--method")
-    return result if world_up is None else to_gravity_world(result, world_up)
+    if world_up is None:
+        return result
+    if result.gravity_world is None:
+        return to_gravity_world(result, world_up)
+    # the receiver's IMU observed up during the capture: it sets the world, and the
+    # stations' OOTX vectors (when any) are compared with it
+    up = imu_up(result)
+    compared = ({"imu_ootx_up_deg": up_angle_deg(result.stations, up, world_up)}
+                if world_up else {})
+    aligned = to_gravity_world(result, up)
+    return dataclasses.replace(aligned, diagnostics={**aligned.diagnostics, **compared})
 
 
 def write_solution(result: SolveResult, output: str | Path, trajectory: str | Path | None,
