@@ -25,6 +25,7 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -82,15 +83,33 @@ def whole_process(seed: int, runs: int = 3) -> list[float]:
     return times
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def seeds_in_parallel(description: str, output: Path, run: Callable[[int], dict]
+                      ) -> tuple[argparse.Namespace, Path, list[dict]]:
+    """The deck benchmarks' command line (``--seeds``, ``--jobs``, ``--output`` default
+    ``output``, ``--force``), the checked output path and ``run(seed)`` of every seed, run
+    ``--jobs`` at a time."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--output", default=str(ROOT / "docs/results/deck.md"))
+    parser.add_argument("--output", default=str(output))
     parser.add_argument("--force", action="store_true")
     args = parser.parse_args()
     out = check_writable(args.output, args.force)
-    rows = Parallel(n_jobs=args.jobs)(delayed(run_one)(s) for s in range(1, args.seeds + 1))
+    rows = Parallel(n_jobs=args.jobs)(delayed(run)(s) for s in range(1, args.seeds + 1))
+    return args, out, rows
+
+
+def write_report(out: Path, lines: list[str]) -> int:
+    """Write the report's lines to ``out`` (folders made) and print them; exit code 0."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text("\n".join(lines))
+    print("\n".join(lines))
+    return 0
+
+
+def main() -> int:
+    args, out, rows = seeds_in_parallel(__doc__.split("\n")[0], ROOT / "docs/results/deck.md",
+                                        run_one)
     cli = whole_process(1)
     pos = np.array([r["pos_mm"] for r in rows])
     rot = np.array([r["rot_deg"] for r in rows])
@@ -119,10 +138,7 @@ def main() -> int:
               f"- whole `lhgraph solve` process on seed 1's capture (start-up, imports, CSV, "
               f"TOML, solve, writing): median **{np.median(cli):.1f} s** of {len(cli)} runs "
               f"(min {min(cli):.1f}); target <= 5 s", ""]
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("\n".join(lines))
-    print("\n".join(lines))
-    return 0
+    return write_report(out, lines)
 
 
 if __name__ == "__main__":

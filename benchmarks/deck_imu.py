@@ -24,7 +24,6 @@ import os
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import argparse  # noqa: E402
 import platform  # noqa: E402
 import shlex  # noqa: E402
 import sys  # noqa: E402
@@ -32,14 +31,15 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
-from joblib import Parallel, delayed  # noqa: E402
 
 from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
 from lhgraph.estimation.graph.track import track  # noqa: E402
 from lhgraph.geometry.transforms import inverse, rotation_angle, se3_log  # noqa: E402
-from lhgraph.io.files import check_writable  # noqa: E402
 from lhgraph.sim.imu import simulate_imu  # noqa: E402
 from lhgraph.sim.simulate import load_simulation_config, simulate  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from deck_benchmark import seeds_in_parallel, write_report  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "configs/simulation/deck.toml"
@@ -82,14 +82,8 @@ def run_one(seed: int) -> dict:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=10)
-    parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--output", default=str(ROOT / "docs/results/deck_imu.md"))
-    parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
-    out = check_writable(args.output, args.force)
-    rows = Parallel(n_jobs=args.jobs)(delayed(run_one)(s) for s in range(1, args.seeds + 1))
+    args, out, rows = seeds_in_parallel(__doc__.split("\n")[0],
+                                        ROOT / "docs/results/deck_imu.md", run_one)
 
     def med(key: str) -> float:
         return float(np.median([r[key] for r in rows]))
@@ -122,10 +116,7 @@ def main() -> int:
               f"{r['light_path_deg']:.3f} / {r['imu_path_deg']:.3f} | "
               f"{r['light_iterations']} / {r['imu_iterations']} |" for r in rows]
     lines.append("")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("\n".join(lines))
-    print("\n".join(lines))
-    return 0
+    return write_report(out, lines)
 
 
 if __name__ == "__main__":

@@ -191,6 +191,29 @@ def test_world_gravity_from_the_imu(tmp_path, deck_with_imu):
         solve(capture.board, capture.angles, models=models, world_up={})
 
 
+def test_simulate_writes_imu_csv(tmp_path, capsys):
+    # an [imu] table: lhgraph simulate writes imu.csv, the light unchanged, the truth's
+    # bias and gravity recorded; a bad key is one line, exit 2
+    base = (Path("configs/simulation/deck.toml").read_text()
+            .replace("duration_s = 120.0", "duration_s = 2.0"))
+    (tmp_path / "plain.toml").write_text(base)
+    (tmp_path / "imu.toml").write_text(base + "\n[imu]\nrate_hz = 200.0\n")
+    for name in ("plain", "imu"):
+        assert main(["simulate", str(tmp_path / f"{name}.toml"), "--output",
+                     str(tmp_path / name), "--quiet"]) == 0
+    stream = load_imu(tmp_path / "imu" / "imu.csv")
+    assert np.median(np.diff(stream.time)) == pytest.approx(1 / 200, rel=1e-3)
+    assert not (tmp_path / "plain" / "imu.csv").exists()
+    assert ((tmp_path / "imu" / "angles.csv").read_bytes()
+            == (tmp_path / "plain" / "angles.csv").read_bytes())
+    truth = load_stations(tmp_path / "imu" / "truth.toml")
+    assert len(truth.extra["simulation"]["imu_bias"]) == 6
+    (tmp_path / "bad.toml").write_text(base + "\n[imu]\nrate = 100.0\n")
+    assert main(["simulate", str(tmp_path / "bad.toml"), "--output",
+                 str(tmp_path / "bad")]) == 2
+    assert "imu" in capsys.readouterr().err
+
+
 LH1_LOG = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")
 
 

@@ -21,6 +21,7 @@ from lhgraph.io.files import as_float, as_int, as_matrix, as_vector, get_key, re
 from lhgraph.model.boards import board_by_name
 from lhgraph.model.lh1 import CALIBRATION_KEYS, FactoryCalibration, StationModel
 from lhgraph.sim.deck_log import LoggingConfig
+from lhgraph.sim.imu import ImuConfig
 from lhgraph.sim.layout import ParametricLayout, parametric_scene
 from lhgraph.sim.motion import PATTERNS
 
@@ -70,7 +71,8 @@ class SimulationConfig:
     ``station_models`` maps station index -> factory calibration and rotor offsets;
     ``first_station`` None = drawn at random; ``clock_ppm`` = how much longer the stations'
     rotor period is on the board's clock (ppm), None = drawn at random in +-30 ppm;
-    ``logging`` = how the receiver logs its hits (:class:`LoggingConfig`).
+    ``logging`` = how the receiver logs its hits (:class:`LoggingConfig`); ``imu`` = the
+    receiver's simulated IMU (:class:`ImuConfig`), None = no IMU stream.
     """
 
     duration_s: float = 8.0
@@ -87,6 +89,7 @@ class SimulationConfig:
     seed: int = 0
     base_dir: str | None = None
     logging: LoggingConfig = field(default_factory=LoggingConfig)
+    imu: ImuConfig | None = None
 
     @property
     def n_stations(self) -> int:
@@ -239,10 +242,11 @@ def parse_simulation_config(data: dict[str, Any], source: str | Path,
 
     models = _parse_factory(top.get("factory", {}), source, n_stations)
     logging = top.options("logging", LoggingConfig)
+    imu = top.options("imu", ImuConfig) if "imu" in data else None
     top.finish()
     return SimulationConfig(duration, fs, board, layout, stations, motion, noise, visibility,
                             models, first_station, clock_ppm, seed,
-                            None if base_dir is None else str(base_dir), logging)
+                            None if base_dir is None else str(base_dir), logging, imu)
 
 
 def load_simulation_config(path: str | Path) -> SimulationConfig:

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from lhgraph.geometry.transforms import inverse, pose_from_quat, transform_points
 from lhgraph.io.angles import Angles, save_angles
 from lhgraph.io.files import check_writable
+from lhgraph.io.imu import save_imu
 from lhgraph.io.stations import Station, Stations, save_stations
 from lhgraph.io.trajectory import Trajectory, save_trajectory
 from lhgraph.model.board import Board, save_board
@@ -35,6 +36,7 @@ from lhgraph.sim.config import (
     parse_simulation_config,
 )
 from lhgraph.sim.deck_log import log_like_deck
+from lhgraph.sim.imu import SimulatedImu, imu_of_motion
 from lhgraph.sim.layout import Scene, parametric_scene, scene_from_poses
 from lhgraph.sim.motion import Motion, facing_rotation, make_motion
 
@@ -50,6 +52,8 @@ CLOCK_PPM_RANGE = 30.0  # random station-vs-board clock offset: uniform in +-30 
 BEAM_WIDTH_M = 6e-3  # laser line width at the rotor...
 BEAM_DIVERGENCE_RAD = 1.8e-3  # ...growing with distance: ~10 us pulses at 3 m
 TRAJECTORY_RATE_HZ = 1000.0  # truth trajectory samples
+IMU_STREAM = 7
+"""The IMU's random stream is seeded by (seed, IMU_STREAM): the light's draws do not change."""
 
 
 # --- results ------------------------------------------------------------------------------
@@ -93,6 +97,7 @@ class SimulatedCapture:
     reflected: NDArray[np.bool_]
     motion: Motion
     n_samples: int
+    imu: SimulatedImu | None = None
 
     def summary(self) -> str:
         """One line: hits per station and duration."""
@@ -252,10 +257,16 @@ def simulate(config: SimulationConfig, seed: int | None = None) -> SimulatedCapt
     extra = {"simulation": {"seed": int(config.seed), "first_station": first,
                             "clock_ppm": ppm, "rotor_period_s": period_s,
                             "up": [float(x) for x in scene.up]}}
+    imu = None
+    if config.imu is not None:  # its own random stream: the light is the same with or without
+        imu = imu_of_motion(motion, scene.up, config.duration_s, config.imu,
+                            np.random.default_rng([int(config.seed), IMU_STREAM]))
+        extra["simulation"] |= {"imu_bias": [float(x) for x in imu.bias],
+                                "gravity": [float(x) for x in imu.gravity]}
     truth = Stations(0, {i: Station(scene.T_world_lh[i], None, models[i]) for i in range(n)},
                      extra)
     return SimulatedCapture(angles, board, truth, Trajectory(t_traj, motion.pose(t_traj)),
-                            pulses, slots, config, reflected, motion, n_samples)
+                            pulses, slots, config, reflected, motion, n_samples, imu)
 
 
 def _timing_noise(config: SimulationConfig, t: NDArray, t_sync: NDArray, period_s: float,
@@ -300,7 +311,8 @@ OUTPUT_FILES = {"angles": "angles.csv", "board": "board.toml", "truth": "truth.t
 def write_simulation(capture: SimulatedCapture, out_dir: str | Path,
                      overwrite: bool = False, raw_capture: bool = False) -> dict[str, Path]:
     """Write ``angles.csv``, ``board.toml``, ``truth.toml``, ``trajectory.csv`` to ``out_dir``
-    (with ``raw_capture`` also the raw signal a board would record, ``capture.lhcap``).
+    (with ``raw_capture`` also the raw signal a board would record, ``capture.lhcap``; with
+    a simulated IMU its ``imu.csv``).
 
     Checks every target first, so either all files are written or none (InputError when one
     exists and ``overwrite`` is false).
@@ -309,12 +321,16 @@ def write_simulation(capture: SimulatedCapture, out_dir: str | Path,
 
     out_dir = Path(out_dir)
     paths = {key: out_dir / name for key, name in OUTPUT_FILES.items()}
+    if capture.imu is not None:
+        paths["imu"] = out_dir / "imu.csv"
     for path in [*paths.values(), *([out_dir / CAPTURE_FILE] if raw_capture else [])]:
         check_writable(path, overwrite)
     save_angles(capture.angles, paths["angles"], overwrite)
     save_board(capture.board, paths["board"], overwrite)
     save_stations(capture.truth, paths["truth"], overwrite)
     save_trajectory(capture.trajectory, paths["trajectory"], overwrite)
+    if capture.imu is not None:
+        save_imu(capture.imu.stream, paths["imu"], overwrite)
     if raw_capture:
         paths["capture"] = write_simulated_capture(capture, out_dir, overwrite)
     return paths
