@@ -30,13 +30,12 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.geometry.transforms import so3_exp
-from lhgraph.io.imu import ImuStream
+from lhgraph.io.imu import STANDARD_GRAVITY_MPS2, ImuStream
 
 if TYPE_CHECKING:
     from lhgraph.estimation.init.pnp_kabsch import Initialisation
 
 Array = NDArray[np.float64]
-STANDARD_GRAVITY = 9.80665
 GRAVITY_SIGMA_MPS2 = 0.3
 """How far the gravity's magnitude as the accelerometer reads it may be from the standard
 one: the local gravity varies by ~0.05 m/s^2 over the Earth, a MEMS accelerometer's scale
@@ -101,8 +100,8 @@ def initial_gravity(data: InertialData, T_world_board: Array) -> Array:
     mean = np.einsum("kij,kj->i", R, data.force[data.force_ok]) / max(len(R), 1)
     norm = float(np.linalg.norm(mean))
     if norm < 1e-6:
-        return np.array([0.0, 0.0, -STANDARD_GRAVITY])
-    return -mean / norm * STANDARD_GRAVITY
+        return np.array([0.0, 0.0, -STANDARD_GRAVITY_MPS2])
+    return -mean / norm * STANDARD_GRAVITY_MPS2
 
 
 def start_with_imu(init: Initialisation, data: InertialData) -> tuple[Initialisation, Array]:

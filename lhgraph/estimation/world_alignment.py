@@ -41,13 +41,13 @@ from lhgraph.config import check_fields, option
 from lhgraph.errors import InputError
 from lhgraph.estimation.gravity import gravity_rotation, up_vectors
 from lhgraph.geometry.transforms import make_pose
+from lhgraph.io.imu import STANDARD_GRAVITY_MPS2
 from lhgraph.io.stations import Station, Stations
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.calibration import StationCalibration
 
 Array = NDArray[np.float64]
 
-STANDARD_GRAVITY_MPS2 = 9.80665
 MIN_CONSISTENCY = 0.9
 """Below this |mean of R f| / 1 g the IMU-derived up is flagged as unreliable."""
 

@@ -10,6 +10,9 @@ import numpy as np
 from lhgraph.errors import InputError
 from lhgraph.io.files import read_csv_columns, write_csv_columns
 
+STANDARD_GRAVITY_MPS2 = 9.80665
+"""Standard gravity (m/s^2): an accelerometer at rest reads this along up; g units of a
+device's log convert to ``imu.csv``'s m/s^2 with it."""
 IMU_COLUMNS = tuple((name, float) for name in ("time", "ax", "ay", "az"))
 GYRO_COLUMNS = ("gx", "gy", "gz")
 
@@ -37,10 +40,12 @@ def load_imu(path: str | Path) -> ImuStream:
     return ImuStream(c["time"], accel, gyro)
 
 
-def save_imu(stream: ImuStream, path: str | Path, overwrite: bool = False) -> Path:
-    """Write ``stream`` as an ``imu.csv`` (the gyro columns only when it has a gyro)."""
+def save_imu(stream: ImuStream, path: str | Path, overwrite: bool = False,
+             time_format: str = "{:.6f}") -> Path:
+    """Write ``stream`` as an ``imu.csv`` (the gyro columns only when it has a gyro; times
+    written with ``time_format``)."""
     columns = {"time": stream.time}
     columns |= {f"a{k}": stream.accel_mps2[:, i] for i, k in enumerate("xyz")}
     if stream.gyro_rad_s is not None:
         columns |= {f"g{k}": stream.gyro_rad_s[:, i] for i, k in enumerate("xyz")}
-    return write_csv_columns(path, columns, {"time": "{:.6f}"}, overwrite)
+    return write_csv_columns(path, columns, {"time": time_format}, overwrite)

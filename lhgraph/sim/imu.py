@@ -20,9 +20,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lhgraph.config import check_fields, option
-from lhgraph.estimation.inertial import STANDARD_GRAVITY
 from lhgraph.geometry.transforms import so3_log
-from lhgraph.io.imu import ImuStream
+from lhgraph.io.imu import STANDARD_GRAVITY_MPS2, ImuStream
 from lhgraph.sim.motion import Motion
 
 if TYPE_CHECKING:
@@ -69,7 +68,7 @@ def imu_of_motion(motion: Motion, up: ArrayLike, duration_s: float, config: ImuC
     rate = so3_log(np.einsum("kji,kjl->kil", before[:, :3, :3], after[:, :3, :3])) / (2 * h)
     accel = (after[:, :3, 3] - 2 * now[:, :3, 3] + before[:, :3, 3]) / h**2
     up = np.asarray(up, dtype=float)
-    gravity = -STANDARD_GRAVITY * up / np.linalg.norm(up)
+    gravity = -STANDARD_GRAVITY_MPS2 * up / np.linalg.norm(up)
     force = np.einsum("kji,kj->ki", R, accel - gravity)
     bias = np.concatenate([rng.normal(0, config.gyro_bias_sigma_rad_s, 3),
                            rng.normal(0, config.accel_bias_sigma_mps2, 3)])

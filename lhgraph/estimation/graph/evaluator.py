@@ -27,7 +27,7 @@ from lhgraph.estimation.graph.variables import (
     SWEEP_OFFSET,
     VariableLayout,
 )
-from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, STANDARD_GRAVITY, InertialData
+from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, InertialData
 from lhgraph.estimation.problem import GraphProblem
 from lhgraph.estimation.residuals import (
     accel_residuals,
@@ -36,6 +36,7 @@ from lhgraph.estimation.residuals import (
     motion_residuals,
     wnoa_covariance,
 )
+from lhgraph.io.imu import STANDARD_GRAVITY_MPS2
 
 Array = NDArray[np.float64]
 FactorError = Callable[[gtsam.CustomFactor, gtsam.Values, list | None], Array]
@@ -204,14 +205,14 @@ class FactorEvaluator:
         return self._step_callback(k, "_a", "_Ha")
 
     def gravity_error(self) -> FactorError:
-        """Callback of the gravity-magnitude factor: ``|g| - STANDARD_GRAVITY`` (m/s^2); with
+        """Callback of the gravity-magnitude factor: ``|g| - STANDARD_GRAVITY_MPS2`` (m/s^2); with
         the magnitude known, the accelerometer bias along the mean up separates from it."""
         def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
             g = values.atVector(GRAVITY.key(0))
             norm = float(np.linalg.norm(g))
             if H is not None:
                 H[0] = (g / max(norm, 1e-9))[None]
-            return np.array([norm - STANDARD_GRAVITY])
+            return np.array([norm - STANDARD_GRAVITY_MPS2])
 
         return error
 
@@ -267,7 +268,7 @@ class FactorEvaluator:
         d = self.inertial
         g = self._g[d.rate_ok] / self.gyro_sigma
         a = self._a[d.force_ok] / self.accel_sigma
-        m = (np.linalg.norm(self._imu[6:]) - STANDARD_GRAVITY) / GRAVITY_SIGMA_MPS2
+        m = (np.linalg.norm(self._imu[6:]) - STANDARD_GRAVITY_MPS2) / GRAVITY_SIGMA_MPS2
         return 0.5 * float(np.sum(g * g) + np.sum(a * a) + m * m)
 
     def _scale_residuals(self) -> None:

@@ -29,14 +29,13 @@ from lhgraph.importers.crazyflie.usdlog import UsdLog, read_usd_log
 from lhgraph.io.angles import save_angles
 from lhgraph.io.cfclient import LH2_PENDING, SystemConfig, read_system_config
 from lhgraph.io.files import check_writable, write_csv_columns
+from lhgraph.io.imu import STANDARD_GRAVITY_MPS2, ImuStream, save_imu
 from lhgraph.io.stations import Station, Stations, save_stations
 from lhgraph.model.board import save_board
 from lhgraph.model.boards import crazyflie_deck
 from lhgraph.model.calibration import save_calibration
 from lhgraph.model.lh1 import StationModel
 
-STANDARD_GRAVITY = 9.80665
-"""m/s^2 per g (the log's accelerometer unit)."""
 IMU_VARIABLES = ("acc.x", "acc.y", "acc.z", "gyro.x", "gyro.y", "gyro.z")
 
 
@@ -126,15 +125,15 @@ def import_crazyflie(log_path: str | Path, out_dir: str | Path,
         missing = [v for v in IMU_VARIABLES if v not in ff.dtype.names]
         if missing:
             raise InputError(f"fixedFrequency events lack {', '.join(missing)}", log_path)
-        columns = {"time": t_imu}
-        columns |= {f"a{k}": ff[f"acc.{k}"].astype(float) * STANDARD_GRAVITY for k in "xyz"}
-        columns |= {f"g{k}": np.radians(ff[f"gyro.{k}"].astype(float)) for k in "xyz"}
-        write_csv_columns(paths["imu"], columns, {"time": "{:.6f}"}, overwrite)
+        # the log's accelerometer is in g, its gyro in deg/s
+        accel = np.stack([ff[f"acc.{k}"].astype(float) for k in "xyz"], axis=1)
+        gyro = np.stack([ff[f"gyro.{k}"].astype(float) for k in "xyz"], axis=1)
+        save_imu(ImuStream(t_imu, accel * STANDARD_GRAVITY_MPS2, np.radians(gyro)),
+                 paths["imu"], overwrite)
         imu_rate = (len(t_imu) - 1) / (t_imu[-1] - t_imu[0]) if len(t_imu) > 1 else 0.0
     else:
-        write_csv_columns(paths["imu"], {k: np.zeros(0) for k in
-                                         ("time", "ax", "ay", "az", "gx", "gy", "gz")}, {},
-                          overwrite)
+        save_imu(ImuStream(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))), paths["imu"],
+                 overwrite)
     if config is not None:
         save_calibration(config.calibrations, paths["ootx"], overwrite)
         save_stations(_stations(config), paths["stations-cfclient"], overwrite)

@@ -19,6 +19,7 @@ from lhgraph.importers.hive.conventions import hive_angles, station_calibrations
 from lhgraph.importers.hive.sync_offsets import SyncBitCorrection, correct_sync_bits
 from lhgraph.io.angles import save_angles
 from lhgraph.io.files import check_writable, write_csv_columns
+from lhgraph.io.imu import ImuStream, save_imu
 from lhgraph.model.board import save_board
 from lhgraph.model.calibration import save_calibration
 
@@ -90,11 +91,8 @@ def import_hive(bag_path: str | Path, out_dir: str | Path, overwrite: bool = Fal
     save_angles(angles, paths["angles"], overwrite)
     save_board(bag.board, paths["board"], overwrite)
     save_calibration(station_calibrations(bag), paths["ootx"], overwrite)
-    write_csv_columns(
-        paths["imu"],
-        {"time": bag.imu_time, **{f"a{k}": bag.imu_accel[:, i] for i, k in enumerate("xyz")},
-         **{f"g{k}": bag.imu_gyro[:, i] for i, k in enumerate("xyz")}},
-        {"time": "{:.9f}"}, overwrite)
+    save_imu(ImuStream(bag.imu_time, bag.imu_accel, bag.imu_gyro), paths["imu"], overwrite,
+             time_format="{:.9f}")
     q = bag.mocap_quat_wxyz
     write_csv_columns(
         paths["mocap"],
