@@ -216,13 +216,14 @@ class FactorEvaluator:
 
         return error
 
-    def imu_bias(self) -> Array:
-        """The IMU bias ``[gyro (rad/s), accelerometer (m/s^2)]`` (6,) now (zeros without)."""
-        return self._imu[:6].copy()
+    def imu_bias(self) -> Array | None:
+        """The IMU bias ``[gyro (rad/s), accelerometer (m/s^2)]`` (6,) now (None without IMU
+        factors)."""
+        return None if self.inertial is None else self._imu[:6].copy()
 
-    def gravity(self) -> Array:
-        """The gravity vector (m/s^2, world) now (zeros without IMU factors)."""
-        return self._imu[6:].copy()
+    def gravity(self) -> Array | None:
+        """The gravity vector (m/s^2, world) now (None without IMU factors)."""
+        return None if self.inertial is None else self._imu[6:].copy()
 
     def inertial_residuals(self) -> tuple[Array, Array]:
         """Gyro (K, 3, rad/s) and accelerometer (K - 1, 3, m/s^2) residuals at the evaluated

@@ -196,5 +196,5 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
         diagnostics={"accel_psd_rot": psd_rot, "accel_psd_pos": psd_pos,
                      "motion_chi2_per_dof": ev.motion_chi2_per_dof(),
                      "angle_sigma_rad": ev.angle_sigma()} | ev.inertial_summary(),
-        gravity_world=ev.gravity() if ev.inertial is not None else None,
+        gravity_world=ev.gravity(),
     )

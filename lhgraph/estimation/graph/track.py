@@ -271,18 +271,14 @@ def track(board: Board, angles: Angles, stations: Stations,
     ev.evaluate(fit.values)
     timings["optimise"] = time.perf_counter() - t0 - timings["initialise"]
     psd_rot, psd_pos = ev.motion_psd()
-    diagnostics = {"accel_psd_rot": psd_rot, "accel_psd_pos": psd_pos,
-                   "angle_sigma_rad": ev.angle_sigma()}
-    if inertial is not None:
-        diagnostics |= ev.inertial_summary()
     return TrackResult(
         path=path_of(problem, ev.board_poses().copy(), sigma),
         initialised=n_pnp,
         status=fit.status.value,
         iterations=fit.iterations,
         timings_s=timings,
-        diagnostics=diagnostics,
-        imu_bias=None if inertial is None else ev.imu_bias(),
-        gravity=None if inertial is None else ev.gravity(),
+        diagnostics={"accel_psd_rot": psd_rot, "accel_psd_pos": psd_pos,
+                     "angle_sigma_rad": ev.angle_sigma()} | ev.inertial_summary(),
+        imu_bias=ev.imu_bias(),
+        gravity=ev.gravity(),
     )
-
