@@ -46,16 +46,19 @@ from lhgraph.io.angles import Angles, load_angles
 from lhgraph.io.files import read_csv_columns
 from lhgraph.io.stations import Stations, load_stations
 from lhgraph.io.trajectory import load_trajectory
+from lhgraph.model import lh1, lh2
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")
+LOGS = {"lh1": Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move/log02"),
+        "lh2": Path("/work/shared/data/bitcraze-positioning/lh2_crossingBeam_move/log00")}
 SEARCH_S = 0.1
 PERCENTILES = (25, 50, 75, 90, 95)
 
 
-def ray_directions(azimuth: np.ndarray, elevation: np.ndarray) -> np.ndarray:
-    """Unit directions (station frame) of LH1 ideal angle pairs: ``(1, tan az, tan el)``."""
-    d = np.stack([np.ones_like(azimuth), np.tan(azimuth), np.tan(elevation)], axis=-1)
+def ray_directions(a0: np.ndarray, a1: np.ndarray, generation: int = 1) -> np.ndarray:
+    """Unit directions (station frame) of a station's ideal angle pairs (LH1: azimuth and
+    elevation; LH2: the two planes' angles)."""
+    d = (lh2 if generation == 2 else lh1).direction(a0, a1)
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
@@ -102,8 +105,9 @@ def crossing_beam_positions(angles: Angles, stations: Stations, max_gap_s: float
             az = interpolated(angles, st, 0, k, moments, max_gap_s)
             el = interpolated(angles, st, 1, k, moments, max_gap_s)
             T = stations.pose(st)
+            generation = stations.stations[st].model.generation
             rays.append((np.broadcast_to(T[:3, 3], (len(moments), 3)),
-                         ray_directions(az, el) @ T[:3, :3].T))
+                         ray_directions(az, el, generation) @ T[:3, :3].T))
         p, _ = crossing_points(*rays[0], *rays[1])
         points.append(p)
     stack = np.stack(points)
@@ -183,17 +187,23 @@ def row(name: str, e: np.ndarray, d0: float, d1: float, n: int) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--import-dir", type=Path, help="output of lhgraph import crazyflie")
+    ap.add_argument("--log", choices=sorted(LOGS), default="lh1",
+                    help="the shared log imported without --import-dir (default lh1)")
     ap.add_argument("--stations", nargs="*", default=[], help="NAME=stations.toml")
     ap.add_argument("--track", nargs="*", default=[], help="NAME=trajectory.csv (measure a)")
     ap.add_argument("--max-gap", type=float, default=0.05, help="interpolation gap (s)")
-    ap.add_argument("--output", type=Path, default=ROOT / "docs/results/crazyflie_evaluation.md")
+    ap.add_argument("--output", type=Path,
+                    help="default docs/results/crazyflie_evaluation.md (lh2: _lh2.md)")
     args = ap.parse_args()
+    suffix = "" if args.log == "lh1" else f"_{args.log}"
+    args.output = args.output or ROOT / f"docs/results/crazyflie_evaluation{suffix}.md"
     start = time.perf_counter()
     tmp = None
     if args.import_dir is None:
         tmp = tempfile.TemporaryDirectory()
         args.import_dir = Path(tmp.name)
-        import_crazyflie(DATA / "log02", args.import_dir, DATA / "system-config.yaml")
+        log = LOGS[args.log]
+        import_crazyflie(log, args.import_dir, log.with_name("system-config.yaml"))
     angles = load_angles(args.import_dir / "angles.csv")
     mocap = read_csv_columns(args.import_dir / "mocap.csv",
                              [("time", float), ("x", float), ("y", float), ("z", float)])
@@ -201,7 +211,7 @@ def main() -> None:
     p_m = np.stack([mocap["x"], mocap["y"], mocap["z"]], axis=1)
     geometries = dict(s.split("=", 1) for s in args.stations) or {
         "cfclient": str(args.import_dir / "stations-cfclient.toml")}
-    lines = ["# Crazyflie LH1 log: station geometries against Qualisys", "",
+    lines = [f"# Crazyflie {args.log.upper()} log: station geometries against Qualisys", "",
              "`python3 benchmarks/crazyflie_evaluation.py` (docs/crazyflie.md). Position error "
              "(mm) after the best rigid fit to the mocap, offsets searched +-100 ms at both "
              "ends (start / end offset in the last column, ms).", "",

@@ -26,7 +26,7 @@ from lhgraph.importers.crazyflie import read_usd_log
 from lhgraph.importers.crazyflie.sweeps import repeated_hits
 from lhgraph.io.cfclient import read_system_config
 from lhgraph.model.boards import crazyflie_deck
-from lhgraph.model.lh1 import FactoryCalibration, StationModel, ideal_from_measured
+from lhgraph.model.station import FactoryCalibration, StationModel, ideal_from_measured
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")

@@ -26,7 +26,7 @@ from lhgraph.geometry.transforms import so3_log
 from lhgraph.importers.hive import read_hive_bag
 from lhgraph.importers.hive.conventions import HIVE_MAPPING, station_calibrations
 from lhgraph.importers.hive.mapping_check import fit_sweep_pairs, sweep_pairs
-from lhgraph.model.lh1 import Convention, StationModel
+from lhgraph.model.station import Convention, StationModel
 
 ROOT = Path(__file__).resolve().parents[1]
 BAG = ROOT.parent / "shared/data/hive-env8/data8.11.bag"

@@ -50,7 +50,7 @@ from lhgraph.importers.hive import align_to_mocap, import_hive
 from lhgraph.io.angles import Angles, load_angles
 from lhgraph.io.trajectory import Trajectory, load_trajectory
 from lhgraph.model.board import Board, load_board
-from lhgraph.model.lh1 import Convention, StationModel
+from lhgraph.model.station import Convention, StationModel
 from lhgraph.workflow.inputs import station_models
 from lhgraph.workflow.window import motion_start
 

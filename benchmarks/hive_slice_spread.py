@@ -26,7 +26,7 @@ from lhgraph.importers.hive import import_hive
 from lhgraph.io.angles import Angles, load_angles
 from lhgraph.io.files import check_writable
 from lhgraph.model.board import load_board
-from lhgraph.model.lh1 import Convention
+from lhgraph.model.station import Convention
 from lhgraph.workflow.inputs import station_models
 from lhgraph.workflow.window import motion_start
 

@@ -24,7 +24,7 @@ import numpy as np
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.geometry.transforms import inverse, rotation_angle
 from lhgraph.io.files import check_writable
-from lhgraph.model.lh1 import Convention
+from lhgraph.model.station import Convention
 from lhgraph.signal.formats import decode_file
 from lhgraph.signal.libsurvive import read_libsurvive_board, read_libsurvive_poses
 from lhgraph.workflow.inputs import models_of

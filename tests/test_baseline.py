@@ -33,7 +33,7 @@ from lhgraph.geometry.transforms import (
 from lhgraph.io.angles import Angles
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.boards import paper_board
-from lhgraph.model.lh1 import FactoryCalibration, StationModel, ideal_angles
+from lhgraph.model.station import FactoryCalibration, StationModel, ideal_angles
 from lhgraph.sim.simulate import load_simulation_config, parse_simulation_config, simulate
 
 ROOT = Path(__file__).resolve().parent.parent

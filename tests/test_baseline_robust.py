@@ -22,7 +22,7 @@ from lhgraph.geometry.transforms import make_pose, rotation_angle, so3_exp, tran
 from lhgraph.io.angles import Angles
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.boards import paper_board
-from lhgraph.model.lh1 import ideal_angles
+from lhgraph.model.station import ideal_angles
 from lhgraph.sim.simulate import load_simulation_config, simulate
 
 DEFAULT = Path(__file__).resolve().parent.parent / "configs" / "simulation" / "default.toml"

@@ -1,5 +1,6 @@
 """Crazyflie uSD log: reader and writer (round trip, CRC, truncation, not a log), the LH1
-angles (repeats dropped, LH2 refused), the Bitcraze calibration mapping, and the real import.
+angles (repeats dropped; LH2 logs recognised), the Bitcraze calibration mapping, and the real
+import.
 
 Synthetic logs are built with the project's own writer. The real-data tests read
 ``/work/shared/data/bitcraze-positioning`` (no licence: never copied into the repository)
@@ -29,7 +30,7 @@ from lhgraph.io.stations import load_stations
 from lhgraph.model.bitcraze import calibration_from_bitcraze, calibration_to_bitcraze
 from lhgraph.model.board import load_board
 from lhgraph.model.boards import crazyflie_deck
-from lhgraph.model.lh1 import FactoryCalibration, StationModel, ideal_from_measured
+from lhgraph.model.station import FactoryCalibration, StationModel, ideal_from_measured
 
 DATA = Path("/work/shared/data/bitcraze-positioning")
 LH1 = DATA / "lh1_crossingBeam_move"
@@ -174,11 +175,22 @@ def test_import_synthetic_writes_contract_files(tmp_path, capsys):
     assert "exists already" in capsys.readouterr().err
 
 
-def test_lh2_log_is_refused(tmp_path, capsys):
+def test_lh2_log_is_imported_as_lh2(tmp_path, capsys):
     write_usd_log(synthetic_log(period_s=1 / 50), tmp_path / "log00")
-    assert main(["import", "crazyflie", str(tmp_path / "log00"), "-o", str(tmp_path / "o")]) == 2
+    r = import_crazyflie(tmp_path / "log00", tmp_path / "o")
+    assert r.system_type == 2 and "LH2" in r.summary()
+    a = load_angles(tmp_path / "o" / "angles.csv")
+    # a plane-0 hit is moved back from its stamp by about a third of a turn (~6.7 ms)
+    back = a.extra["log_time"] - a.time
+    assert np.median(back[a.axis == 0]) == pytest.approx(0.02 / 3, abs=2e-3)
+    assert np.median(np.abs(back[a.axis == 1])) < 1e-3
+    # an LH1 system configuration does not describe an LH2 log
+    yaml_path = tmp_path / "lh1.yaml"
+    yaml_path.write_text("type: lighthouse_system_configuration\nversion: '1'\nsystemType: 1\n")
+    assert main(["import", "crazyflie", str(tmp_path / "log00"), "--system-config",
+                 str(yaml_path), "-o", str(tmp_path / "p")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "LH2" in err[0] and "#15" in err[0]
+    assert len(err) == 1 and "LH2 sweeps" in err[0]
 
 
 def test_calibration_mapping_round_trip():

@@ -18,7 +18,7 @@ from lhgraph.estimation.problem import build_problem
 from lhgraph.estimation.sweep_times import co_logged_fraction, retime_cycles, rotor_grid
 from lhgraph.geometry.transforms import inverse, make_pose, rotation_angle, so3_exp
 from lhgraph.model.boards import crazyflie_deck
-from lhgraph.model.lh1 import ideal_angles
+from lhgraph.model.station import ideal_angles
 from lhgraph.sim.config import parse_simulation_config
 from lhgraph.sim.simulate import load_simulation_config, simulate
 

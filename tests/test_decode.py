@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from lhgraph.cli import main
 from lhgraph.model.calibration import StationCalibration, load_calibration
-from lhgraph.model.lh1 import CALIBRATION_KEYS, FactoryCalibration
+from lhgraph.model.station import CALIBRATION_KEYS, FactoryCalibration
 from lhgraph.signal.capture import (
     Capture,
     edges_to_pulses,

@@ -25,7 +25,7 @@ from lhgraph.io.stations import Station, Stations, save_stations
 from lhgraph.io.trajectory import Trajectory, save_trajectory
 from lhgraph.model.bitcraze import calibration_from_bitcraze
 from lhgraph.model.calibration import StationCalibration, save_calibration
-from lhgraph.model.lh1 import FactoryCalibration
+from lhgraph.model.station import FactoryCalibration
 from lhgraph.workflow.export import export_cfclient
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "bitcraze-positioning"

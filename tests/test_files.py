@@ -17,7 +17,7 @@ from lhgraph.io.stations import Station, Stations, load_stations, save_stations
 from lhgraph.io.trajectory import Trajectory, load_trajectory, save_trajectory
 from lhgraph.model.board import load_board, make_board, save_board
 from lhgraph.model.calibration import StationCalibration, load_calibration, save_calibration
-from lhgraph.model.lh1 import FactoryCalibration, StationModel
+from lhgraph.model.station import FactoryCalibration, StationModel
 
 HEADER = "time,lighthouse,axis,sensor,angle\n"
 

@@ -10,7 +10,7 @@ import pytest
 
 from lhgraph.cli import main
 from lhgraph.errors import InputError
-from lhgraph.model.lh1 import CALIBRATION_KEYS
+from lhgraph.model.station import CALIBRATION_KEYS
 from lhgraph.signal.decode import DecodeOptions, decode_pulses
 from lhgraph.signal.libsurvive import (
     match_angles,

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lhgraph.geometry.transforms import se3_exp
-from lhgraph.model.lh1 import (
+from lhgraph.model.station import (
     Convention,
     FactoryCalibration,
     StationModel,

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from lhgraph.errors import InputError
 from lhgraph.model.calibration import StationCalibration
-from lhgraph.model.lh1 import FactoryCalibration
+from lhgraph.model.station import FactoryCalibration
 from lhgraph.signal.ootx import (
     PAYLOAD_LEN,
     OotxDecoder,

@@ -10,7 +10,7 @@ import pytest
 from lhgraph.estimation.init.pnp import board_poses, planar_twins
 from lhgraph.geometry.transforms import se3_exp
 from lhgraph.model.boards import paper_board, pyramid_board
-from lhgraph.model.lh1 import ideal_angles
+from lhgraph.model.station import ideal_angles
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -7,7 +7,7 @@ from lhgraph.errors import InputError
 from lhgraph.estimation.reconstruct import Measurements, reconstruct_measurements, to_ideal
 from lhgraph.io.angles import Angles
 from lhgraph.model.board import make_board
-from lhgraph.model.lh1 import FactoryCalibration, StationModel, sweep_angle
+from lhgraph.model.station import FactoryCalibration, StationModel, sweep_angle
 
 SLOT = 1 / 120  # one sweep slot (s)
 HIT_STEP = 50e-6  # sensor j is hit j * HIT_STEP after the sweep's first hit

@@ -14,7 +14,7 @@ from lhgraph.estimation.residuals import (
     wnoa_covariance,
 )
 from lhgraph.geometry.transforms import se3_exp
-from lhgraph.model.lh1 import FactoryCalibration, StationModel
+from lhgraph.model.station import FactoryCalibration, StationModel
 
 EPS = 1e-6
 

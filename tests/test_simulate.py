@@ -15,7 +15,7 @@ from lhgraph.io.angles import load_angles
 from lhgraph.io.stations import load_stations
 from lhgraph.io.trajectory import load_trajectory
 from lhgraph.model.board import load_board
-from lhgraph.model.lh1 import FactoryCalibration, StationModel, predict, sweep_angle
+from lhgraph.model.station import FactoryCalibration, StationModel, predict, sweep_angle
 from lhgraph.signal.pulses import LightPulses
 from lhgraph.sim.config import (
     ROTOR_PERIOD_S,

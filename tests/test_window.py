@@ -8,7 +8,7 @@ import pytest
 from lhgraph.errors import InputError
 from lhgraph.geometry.transforms import make_pose, so3_exp, transform_points
 from lhgraph.io.angles import Angles
-from lhgraph.model.lh1 import ideal_angles
+from lhgraph.model.station import ideal_angles
 from lhgraph.workflow.window import motion_rate, motion_start, moving_window
 
 SENSORS = np.array([[0.0, 0.0, 0.0], [0.0, 0.05, 0.0], [0.0, 0.0, 0.05], [0.0, -0.05, 0.02]])

@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 from lhgraph.estimation.residuals import BearingHits
 from lhgraph.io.angles import Angles
 from lhgraph.model.board import Board
-from lhgraph.model.lh1 import StationModel
+from lhgraph.model.station import StationModel
 
 Array = NDArray[np.float64]
 

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from lhgraph.errors import InputError
 from lhgraph.io.angles import SWEEP_GAP_S, Angles
 from lhgraph.model.board import Board
-from lhgraph.model.lh1 import StationModel, ideal_from_measured
+from lhgraph.model.station import StationModel, ideal_from_measured
 
 Array = NDArray[np.float64]
 

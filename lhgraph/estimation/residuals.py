@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.geometry.transforms import cross, inverse, se3_log, skew
-from lhgraph.model.lh1 import StationModel, board_jacobian, sweep_angle
+from lhgraph.model.station import StationModel, board_jacobian, sweep_angle
 
 Array = NDArray[np.float64]
 _EYE6 = np.eye(6)

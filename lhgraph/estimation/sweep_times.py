@@ -134,3 +134,26 @@ def retime_cycles(angles: Angles, co_logged: set[int] | None = None,
     retimed = Angles(time, angles.lighthouse, angles.axis, angles.sensor, angles.angle,
                      {**angles.extra, "sweep": state[ids]})
     return retimed.select(order)
+
+
+LH2_CYCLE_GAP_S = 0.015
+"""An LH2 station's second plane passes a diode 4-8 ms after its first (SPEC §8, the real
+log); a plane-1 sweep joins the plane-0 sweep before it when it comes within this."""
+
+
+def plane_cycles(angles: Angles) -> Angles:
+    """``angles`` (LH2 hit times) with one board state per rotor turn of each station: the
+    extra column ``sweep`` joins each first-plane sweep with the station's second-plane
+    sweep that follows it within ``LH2_CYCLE_GAP_S`` (a 4-diode deck then has both planes'
+    8 hits per state, as the LH1 grid gives both axes; the bearing factor propagates each
+    hit by its time offset with the state's twist)."""
+    ids, t, station, axis = _sweeps(angles)
+    state = np.arange(len(t))
+    for s in np.unique(station).tolist():
+        rows = np.flatnonzero(station == s)
+        rows = rows[np.argsort(t[rows], kind="stable")]
+        joins = ((axis[rows[1:]] == 1) & (axis[rows[:-1]] == 0)
+                 & (np.diff(t[rows]) < LH2_CYCLE_GAP_S))
+        state[rows[1:][joins]] = rows[:-1][joins]
+    return Angles(angles.time, angles.lighthouse, angles.axis, angles.sensor, angles.angle,
+                  {**angles.extra, "sweep": state[ids]})

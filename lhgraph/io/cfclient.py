@@ -18,9 +18,8 @@ The document (Bitcraze's cfclient and cflib read and write it; docs/export.md):
 (:class:`SystemConfig`: ``T_world_lh`` and our model's factory calibration); the mapping of
 the calibration terms between Bitcraze's convention and ours lives in
 :mod:`lhgraph.model.bitcraze` only. ``<bs>`` is the base-station index (an integer key), the
-station index of our files. Only LH1 (systemType 1) has a calibration mapping so far: LH2
-files are refused in one line until issue #15 registers its mapping in
-:data:`CALIBRATION_MAPPINGS`.
+station index of our files. The calibrations of an LH2 system (systemType 2) are
+generation-2 :class:`StationCalibration` objects.
 """
 
 from __future__ import annotations
@@ -40,11 +39,13 @@ from lhgraph.io.files import read_input, write_atomic
 from lhgraph.model.bitcraze import (
     calibration_from_bitcraze,
     calibration_to_bitcraze,
+    lh2_calibration_from_bitcraze,
+    lh2_calibration_to_bitcraze,
     pose_from_bitcraze,
     pose_to_bitcraze,
 )
 from lhgraph.model.calibration import StationCalibration
-from lhgraph.model.lh1 import FactoryCalibration
+from lhgraph.model.station import FactoryCalibration
 
 Array = NDArray[np.float64]
 CalibrationMapping = tuple[Callable[[Sequence[dict[str, float]], str], FactoryCalibration],
@@ -55,9 +56,9 @@ FILE_VERSION = "1"
 SYSTEM_TYPES = {1: "LH1", 2: "LH2"}
 CALIBRATION_MAPPINGS: dict[int, CalibrationMapping] = {
     1: (calibration_from_bitcraze, calibration_to_bitcraze),
+    2: (lh2_calibration_from_bitcraze, lh2_calibration_to_bitcraze),
 }
-"""Per system type, Bitcraze's calibration terms -> ours and back (LH2 joins with #15)."""
-LH2_PENDING = "LH2 systems come with issue #15"
+"""Per system type (= station generation), Bitcraze's calibration terms -> ours and back."""
 MAX_ORTHONORMAL_ERROR = 1e-3
 """A rotation is accepted when ``|R^T R - I|`` stays below this (float32 files reach 1e-7)."""
 
@@ -130,7 +131,8 @@ def _calibration(value: Any, system_type: int, source: Path, where: str) -> Stat
         raise InputError(f"uid must be an unsigned 32-bit integer, got {uid!r}", source,
                          f"{where}.uid")
     from_bitcraze = _mapping(system_type, source)[0]
-    return StationCalibration(from_bitcraze(sweeps, f"{source}:{where}"), uid)
+    return StationCalibration(from_bitcraze(sweeps, f"{source}:{where}"), uid,
+                              generation=system_type)
 
 
 def _mapping(system_type: int, source: str | Path | None) -> CalibrationMapping:
@@ -139,9 +141,6 @@ def _mapping(system_type: int, source: str | Path | None) -> CalibrationMapping:
     if system_type not in SYSTEM_TYPES:
         raise InputError(f"systemType must be 1 (LH1) or 2 (LH2), got {system_type!r}", source,
                          "systemType")
-    if system_type not in CALIBRATION_MAPPINGS:
-        raise InputError(f"an {SYSTEM_TYPES[system_type]} system (systemType {system_type}): "
-                         f"{LH2_PENDING}", source, "systemType")
     return CALIBRATION_MAPPINGS[system_type]
 
 

@@ -2,7 +2,9 @@
 
 ``[lighthouses.<index>]`` tables hold ``position`` and ``quaternion = [w, x, y, z]`` of
 ``T_world_lh``; results add ``covariance`` (6x6, tangent order ``[rx, ry, rz, tx, ty, tz]``)
-and may add the factory-calibration keys and ``rotor_offsets``.
+and may add the factory-calibration keys and ``rotor_offsets``; an LH2 station has
+``generation = 2`` (LH1 when absent), its ogee terms and maybe its ``channel``
+(docs/formats.md).
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ from lhgraph.io.files import (
     station_tables,
     write_toml,
 )
-from lhgraph.model.lh1 import CALIBRATION_KEYS, FactoryCalibration, StationModel
+from lhgraph.model.calibration import generation_keys, generation_terms
+from lhgraph.model.station import CALIBRATION_KEYS, FactoryCalibration, StationModel
 
 
 @dataclass
@@ -69,10 +72,12 @@ def _parse_model(table: dict[str, Any], path: str | Path, where: str) -> Station
     for key in CALIBRATION_KEYS:
         if key in table:
             values[key] = as_vector(table[key], 2, path, f"{where}.{key}")
+    generation, channel = generation_terms(table, path, where, values)
     offsets = np.zeros((2, 3))
     if "rotor_offsets" in table:
         offsets = as_matrix(table["rotor_offsets"], 2, 3, path, f"{where}.rotor_offsets")
-    return StationModel(FactoryCalibration(**values), offsets)
+    return StationModel(FactoryCalibration(**values), offsets, generation=generation,
+                        channel=channel)
 
 
 def load_stations(path: str | Path) -> Stations:
@@ -110,9 +115,10 @@ def stations_to_toml(stations: Stations, with_model: bool = True) -> dict[str, A
         if s.covariance is not None:
             table["covariance"] = [[float(x) for x in row] for row in s.covariance]
         if with_model and not s.model.calibration.is_zero():
-            table.update(s.model.calibration.as_dict())
+            table.update(s.model.calibration.as_dict(s.model.generation))
         if with_model and np.any(s.model.rotor_offsets):
             table["rotor_offsets"] = [[float(x) for x in row] for row in s.model.rotor_offsets]
+        table.update(generation_keys(s.model.generation, s.model.channel))
         tables[str(index)] = table
     return {**stations.extra, "reference": int(stations.reference), "lighthouses": tables}
 

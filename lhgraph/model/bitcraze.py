@@ -13,6 +13,10 @@ reproduces the deck firmware's ``correctedAngle`` to a few µrad (median) with
 the angle after; its curve term has the opposite sign). The ogee terms are LH2 only and must
 be zero here.
 
+Factory calibration (LH2): our terms *are* Bitcraze's (:mod:`lhgraph.model.lh2` states the
+model in them); the deck firmware's correction of the real LH2 log is reproduced to 0.2
+µrad with its own stopping rule (docs/model.md). All seven terms are kept.
+
 Station geometry: ``geos.<bs>`` has ``origin`` (m) and ``rotation`` (3x3, station frame to
 world), with the station frame +x forward, +y left, +z up: the same as ours (SPEC §4), so
 ``T_world_lh = [rotation | origin]``; verified on the log by turning ``correctedAngle`` into
@@ -28,7 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.geometry.transforms import make_pose
-from lhgraph.model.lh1 import FactoryCalibration
+from lhgraph.model.station import FactoryCalibration
 
 Array = NDArray[np.float64]
 
@@ -71,6 +75,27 @@ def calibration_to_bitcraze(calibration: FactoryCalibration) -> list[dict[str, f
     return [{"phase": float(c.phase[k]), "tilt": float(c.tilt[k]),
              "curve": float(-c.curve[k]), "gibphase": float(gibphase[k]),
              "gibmag": float(c.gibmag[k]), "ogeephase": 0.0, "ogeemag": 0.0}
+            for k in (0, 1)]
+
+
+def lh2_calibration_from_bitcraze(sweeps: Sequence[Mapping[str, float]],
+                                  source: str | None = None) -> FactoryCalibration:
+    """Our LH2 :class:`FactoryCalibration` from Bitcraze's two sweep (light plane)
+    dictionaries: the same terms (InputError naming ``source`` if one is missing)."""
+    if len(sweeps) != 2:
+        raise InputError(f"expected 2 sweeps, got {len(sweeps)}", source)
+    try:
+        return FactoryCalibration(**{key: [float(s[key]) for s in sweeps]
+                                     for key in BITCRAZE_KEYS})
+    except KeyError as missing:
+        raise InputError(f"sweep without {missing}", source) from None
+    except (TypeError, ValueError):
+        raise InputError("a sweep value is not a number", source) from None
+
+
+def lh2_calibration_to_bitcraze(calibration: FactoryCalibration) -> list[dict[str, float]]:
+    """Bitcraze's two sweep dictionaries of our LH2 calibration (the same terms)."""
+    return [{key: float(getattr(calibration, key)[k]) for key in BITCRAZE_KEYS}
             for k in (0, 1)]
 
 

@@ -3,7 +3,9 @@
 ``[lighthouses.K]`` with ``id`` (int), ``phase, tilt, curve, gibphase, gibmag`` as
 ``[axis0, axis1]`` (rad) and ``accel_dir`` (3 ints: the accelerometer at rest, i.e. up, in
 the station's native frame, :mod:`lhgraph.estimation.gravity`); K is the station index used in the
-angles CSV.
+angles CSV. Added for LH2 stations (all optional, docs/formats.md): ``generation`` (1 or 2;
+1 when absent), ``ogeephase, ogeemag`` (``[plane0, plane1]``, rad; LH2 only) and
+``channel`` (1-16, the station's LH2 channel).
 """
 
 from __future__ import annotations
@@ -16,7 +18,17 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.io.files import as_int, as_vector, read_toml, station_tables, write_toml
-from lhgraph.model.lh1 import CALIBRATION_KEYS, FactoryCalibration
+from lhgraph.model.station import (
+    CALIBRATION_KEYS,
+    GENERATIONS,
+    LH2_CALIBRATION_KEYS,
+    Convention,
+    FactoryCalibration,
+    StationModel,
+)
+
+N_CHANNELS = 16
+"""LH2 stations broadcast on channels 1-16 (SPEC §8)."""
 
 
 @dataclass(frozen=True)
@@ -26,6 +38,38 @@ class StationCalibration:
     calibration: FactoryCalibration
     id: int = 0
     accel_dir: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    generation: int = 1
+    channel: int | None = None
+
+    def model(self, convention: Convention | None = None) -> StationModel:
+        """The station's measurement model (LH1 sign ``convention``: default
+        :class:`Convention`)."""
+        return StationModel(self.calibration, convention=convention or Convention(),
+                            generation=self.generation, channel=self.channel)
+
+
+def generation_terms(table: dict, path: str | Path, where: str, values: dict[str, np.ndarray]
+                     ) -> tuple[int, int | None]:
+    """A station table's ``generation`` (1 when absent) and ``channel`` (None when absent);
+    its LH2 calibration terms are added to ``values`` (InputError: an unknown generation, a
+    channel outside 1-16, ogee terms on an LH1 station)."""
+    generation = as_int(table.get("generation", 1), path, where + ".generation")
+    if generation not in GENERATIONS:
+        raise InputError(f"generation must be 1 or 2, got {generation}", path,
+                         where + ".generation")
+    for key in LH2_CALIBRATION_KEYS:
+        if key in table:
+            if generation != 2:
+                raise InputError(f"'{key}' is an LH2 term: set generation = 2", path,
+                                 f"{where}.{key}")
+            values[key] = as_vector(table[key], 2, path, f"{where}.{key}")
+    channel = None
+    if "channel" in table:
+        channel = as_int(table["channel"], path, where + ".channel")
+        if not 1 <= channel <= N_CHANNELS:
+            raise InputError(f"channel must be 1-{N_CHANNELS}, got {channel}", path,
+                             where + ".channel")
+    return generation, channel
 
 
 def load_calibration(path: str | Path) -> dict[int, StationCalibration]:
@@ -42,7 +86,9 @@ def load_calibration(path: str | Path) -> dict[int, StationCalibration]:
         accel = np.zeros(3)
         if "accel_dir" in table:
             accel = as_vector(table["accel_dir"], 3, path, where + ".accel_dir")
-        out[index] = StationCalibration(FactoryCalibration(**values), station_id, accel)
+        generation, channel = generation_terms(table, path, where, values)
+        out[index] = StationCalibration(FactoryCalibration(**values), station_id, accel,
+                                        generation, channel)
     return out
 
 
@@ -55,7 +101,15 @@ def save_calibration(
         c = calibrations[index]
         tables[str(index)] = {
             "id": int(c.id),
-            **c.calibration.as_dict(),
+            **c.calibration.as_dict(c.generation),
             "accel_dir": [float(x) for x in c.accel_dir],
+            **generation_keys(c.generation, c.channel),
         }
     return write_toml(path, {"lighthouses": tables}, overwrite)
+
+
+def generation_keys(generation: int, channel: int | None) -> dict[str, int]:
+    """The ``generation`` and ``channel`` keys of a station table (none for an LH1 station
+    without a channel: old readers see the files they know)."""
+    keys = {"generation": generation} if generation != 1 else {}
+    return keys | ({"channel": channel} if channel is not None else {})

@@ -1,4 +1,5 @@
-"""Lighthouse v1 measurement model: station-frame point -> sweep angle (pure, vectorised numpy).
+"""Lighthouse v1 measurement model (pure, vectorised numpy): a rotor-frame point -> the sweep
+angle, used through :func:`lhgraph.model.station.sweep_angle`.
 
 Station frame (SPEC §4): +x forward (optical axis), +y left, +z up. Axis 0 measures azimuth
 ``atan2(y, x)`` (rotor axis along z), axis 1 measures elevation ``atan2(z, x)`` (rotor axis
@@ -10,75 +11,21 @@ along y). Each rotor may sit at an offset from the station origin. The factory c
     axis 1:  t' = atan2(z, x) - phase1 + asin(tan(tilt1) y / sqrt(x^2 + z^2))
              a1 = t' + g gibmag1 sin(gibphase1 + t') + c curve1 atan2(y, x)^2
 
-with the sign convention ``(g, c)`` an explicit parameter (:class:`Convention`). Angles are
-in radians. Jacobians follow GTSAM's ``Pose3`` tangent convention (right perturbation,
-``[omega, v]``).
+with the sign convention ``(g, c)`` an explicit parameter
+(:class:`~lhgraph.model.station.Convention`). Angles are in radians.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lhgraph.geometry.transforms import cross
+if TYPE_CHECKING:
+    from lhgraph.model.station import Convention, FactoryCalibration
 
 Array = NDArray[np.float64]
-
-CALIBRATION_KEYS = ("phase", "tilt", "curve", "gibphase", "gibmag")
-
-
-@dataclass(frozen=True)
-class Convention:
-    """Signs of the gib and curve terms. Public implementations disagree; the default
-    (gib -1, curve +1) fits two real recordings best (docs/model.md)."""
-
-    gib_sign: float = -1.0
-    curve_sign: float = 1.0
-
-
-@dataclass(frozen=True)
-class FactoryCalibration:
-    """Per-axis factory calibration of one station, each field ``[axis0, axis1]`` (rad)."""
-
-    phase: Array = field(default_factory=lambda: np.zeros(2))
-    tilt: Array = field(default_factory=lambda: np.zeros(2))
-    curve: Array = field(default_factory=lambda: np.zeros(2))
-    gibphase: Array = field(default_factory=lambda: np.zeros(2))
-    gibmag: Array = field(default_factory=lambda: np.zeros(2))
-
-    def __post_init__(self) -> None:
-        for key in CALIBRATION_KEYS:
-            value = np.asarray(getattr(self, key), dtype=float).reshape(2)
-            object.__setattr__(self, key, value)
-
-    def as_dict(self) -> dict[str, list[float]]:
-        """Plain ``{key: [axis0, axis1]}`` for files."""
-        return {key: [float(x) for x in getattr(self, key)] for key in CALIBRATION_KEYS}
-
-    def is_zero(self) -> bool:
-        """True when every term is zero (the ideal station)."""
-        return all(not np.any(getattr(self, key)) for key in CALIBRATION_KEYS)
-
-
-@dataclass(frozen=True)
-class StationModel:
-    """Everything that maps a station-frame point to the two sweep angles of one station.
-
-    ``rotor_offsets[k]`` is the position (m, station frame) of axis k's rotor centre.
-    """
-
-    calibration: FactoryCalibration = field(default_factory=FactoryCalibration)
-    rotor_offsets: Array = field(default_factory=lambda: np.zeros((2, 3)))
-    convention: Convention = field(default_factory=Convention)
-
-    def __post_init__(self) -> None:
-        offsets = np.asarray(self.rotor_offsets, dtype=float).reshape(2, 3)
-        object.__setattr__(self, "rotor_offsets", offsets)
-
-
-IDEAL = StationModel()
 
 
 def ideal_angles(p_lh: ArrayLike) -> Array:
@@ -101,21 +48,12 @@ def _axis_components(q: Array, axis: Array) -> tuple[Array, Array, Array, Array]
     return x, u, w, tilt_sign
 
 
-def sweep_angle(
-    p_lh: ArrayLike,
-    axis: ArrayLike,
-    model: StationModel = IDEAL,
-    *,
-    jacobian: bool = False,
-) -> Array | tuple[Array, Array]:
-    """Measured sweep angle (rad) of station-frame points ``(N, 3)`` for ``axis`` ``(N,)``.
-
-    With ``jacobian=True`` also returns ``d angle / d p_lh`` ``(N, 3)``.
-    """
-    p = np.asarray(p_lh, dtype=float)
-    axis = np.asarray(axis, dtype=int)
-    cal, conv = model.calibration, model.convention
-    q = p - model.rotor_offsets[axis]
+def rotor_angle(q: Array, axis: Array, cal: FactoryCalibration, conv: Convention, *,
+                jacobian: bool = False) -> Array | tuple[Array, Array]:
+    """Measured LH1 sweep angle (rad) of rotor-frame points ``q`` ``(N, 3)`` (m: the
+    station-frame point less its axis's rotor offset) for ``axis`` ``(N,)`` under the factory
+    calibration ``cal`` (signs ``conv``); with ``jacobian=True`` also ``d angle / d q``
+    ``(N, 3)``. Callers use :func:`lhgraph.model.station.sweep_angle`."""
     x, u, w, s_t = _axis_components(q, axis)
     phase, tilt = cal.phase[axis], cal.tilt[axis]
     curve, gibphase, gibmag = cal.curve[axis], cal.gibphase[axis], cal.gibmag[axis]
@@ -143,85 +81,15 @@ def sweep_angle(
     d_x = outer * d_primed_x + curve_coeff * (-w / xw2)
     d_u = outer * d_primed_u
     d_w = outer * d_primed_w + curve_coeff * (x / xw2)
-    J = np.empty(p.shape)
+    J = np.empty(q.shape)
     J[..., 0] = d_x
     J[..., 1] = np.where(axis == 0, d_u, d_w)
     J[..., 2] = np.where(axis == 0, d_w, d_u)
     return angle, J
 
 
-def _relative_pose(T_world_lh: Array, T_world_board: Array) -> tuple[Array, Array]:
-    """Rotation ``(..., 3, 3)`` and translation ``(..., 3)`` of ``T_lh_board``."""
-    R_l = np.swapaxes(T_world_lh[..., :3, :3], -1, -2)
-    R = R_l @ T_world_board[..., :3, :3]
-    t = (R_l @ (T_world_board[..., :3, 3] - T_world_lh[..., :3, 3])[..., None])[..., 0]
-    return R, t
-
-
-def sensor_in_station(T_world_lh: ArrayLike, T_world_board: ArrayLike, s_board: ArrayLike) -> Array:
-    """Station-frame position ``(N, 3)`` of board-frame sensor points ``(N, 3)``.
-
-    ``T_world_lh`` and ``T_world_board`` are ``(4, 4)`` or ``(N, 4, 4)``.
-    """
-    R, t = _relative_pose(np.asarray(T_world_lh, dtype=float),
-                          np.asarray(T_world_board, dtype=float))
-    s = np.asarray(s_board, dtype=float)
-    return (R @ s[..., None])[..., 0] + t
-
-
-def board_jacobian(J_p: Array, R_lh_board: Array, s_board: Array) -> Array:
-    """Derivative ``(..., 6)`` of an angle w.r.t. a right perturbation ``[omega, v]`` of
-    ``T_world_board``, from its derivative ``J_p`` ``(..., 3)`` w.r.t. the station-frame point
-    ``p = R_lh_board s_board + t``: ``d p / d xi = R_lh_board [-[s]x, I]``, so the result is
-    ``[s x J_b, J_b]`` with ``J_b = J_p R_lh_board`` (broadcasting over leading axes)."""
-    J_b = (J_p[..., None, :] @ R_lh_board)[..., 0, :]
-    return np.concatenate([cross(s_board, J_b), J_b], axis=-1)
-
-
-def predict(
-    T_world_lh: ArrayLike,
-    T_world_board: ArrayLike,
-    s_board: ArrayLike,
-    axis: ArrayLike,
-    model: StationModel = IDEAL,
-    *,
-    jacobians: bool = False,
-) -> Array | tuple[Array, Array, Array]:
-    """Predicted angles ``(N,)`` of sensors ``s_board`` (board frame, m) seen by one station.
-
-    With ``jacobians=True`` also returns ``H_lh`` and ``H_board`` ``(N, 6)``: the derivatives
-    w.r.t. right perturbations ``[omega, v]`` of ``T_world_lh`` and ``T_world_board``.
-    """
-    R, t = _relative_pose(np.asarray(T_world_lh, dtype=float),
-                          np.asarray(T_world_board, dtype=float))
-    s = np.asarray(s_board, dtype=float)
-    p_lh = (R @ s[..., None])[..., 0] + t
-    if not jacobians:
-        return sweep_angle(p_lh, axis, model)
-    angle, J_p = sweep_angle(p_lh, axis, model, jacobian=True)
-    # p_lh = R_l^T (R_b s + t_b - t_l)
-    # d p_lh / d xi_lh    = [ [p_lh]x , -I ]       -> J [p]x = J x p
-    H_lh = np.concatenate([cross(J_p, p_lh), -J_p], axis=-1)
-    return angle, H_lh, board_jacobian(J_p, R, s)
-
-
-def ideal_from_measured(
-    azimuth: ArrayLike, elevation: ArrayLike, model: StationModel = IDEAL, iterations: int = 8
-) -> tuple[Array, Array]:
-    """Invert the factory-calibration distortion of a direction's measured angle pair.
-
-    Returns the ideal ``(azimuth, elevation)`` (rad) whose direction ``(1, tan az, tan el)``
-    the model maps to the measured pair; rotor offsets are ignored (far-field). Used by the
-    baseline, which works on ideal angles.
-    """
-    az_m = np.asarray(azimuth, dtype=float)
-    el_m = np.asarray(elevation, dtype=float)
-    az, el = az_m.copy(), el_m.copy()
-    far = StationModel(model.calibration, np.zeros((2, 3)), model.convention)
-    for _ in range(iterations):
-        d = np.stack([np.ones_like(az), np.tan(az), np.tan(el)], axis=-1).reshape(-1, 3)
-        pred_az = sweep_angle(d, np.zeros(len(d), dtype=int), far).reshape(az.shape)
-        pred_el = sweep_angle(d, np.ones(len(d), dtype=int), far).reshape(el.shape)
-        az = az + (az_m - pred_az)
-        el = el + (el_m - pred_el)
-    return az, el
+def direction(azimuth: ArrayLike, elevation: ArrayLike) -> Array:
+    """Station-frame direction ``(..., 3)`` ``(1, tan az, tan el)`` of ideal angles (rad)."""
+    az = np.asarray(azimuth, dtype=float)
+    return np.stack([np.ones_like(az), np.tan(az), np.tan(np.asarray(elevation, float))],
+                    axis=-1)

@@ -31,7 +31,7 @@ from lhgraph.errors import InputError
 from lhgraph.geometry.transforms import pose_from_quat
 from lhgraph.model.board import Board, make_board
 from lhgraph.model.calibration import StationCalibration
-from lhgraph.model.lh1 import FactoryCalibration
+from lhgraph.model.station import FactoryCalibration
 from lhgraph.signal.pulses import LightPulses
 
 TICK_HZ = 48_000_000

@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.model.calibration import StationCalibration
-from lhgraph.model.lh1 import FactoryCalibration
+from lhgraph.model.station import FactoryCalibration
 
 PAYLOAD_LEN = 33
 PREAMBLE_ZEROS = 17

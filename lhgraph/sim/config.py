@@ -19,7 +19,12 @@ from lhgraph.config import Table
 from lhgraph.errors import InputError
 from lhgraph.io.files import as_float, as_int, as_matrix, as_vector, get_key, read_toml
 from lhgraph.model.boards import board_by_name
-from lhgraph.model.lh1 import CALIBRATION_KEYS, FactoryCalibration, StationModel
+from lhgraph.model.station import (
+    CALIBRATION_KEYS,
+    LH2_CALIBRATION_KEYS,
+    FactoryCalibration,
+    StationModel,
+)
 from lhgraph.sim.deck_log import LoggingConfig
 from lhgraph.sim.imu import ImuConfig
 from lhgraph.sim.layout import ParametricLayout, parametric_scene
@@ -27,6 +32,15 @@ from lhgraph.sim.motion import PATTERNS
 
 ROTOR_PERIOD_S = 1.0 / 60.0  # T: one rotor turn, 800000 ticks of 48 MHz
 SLOT_S = ROTOR_PERIOD_S / 2  # one sync flash per station per slot
+LH2_PERIOD_TICKS = (959000, 957000, 953000, 949000, 947000, 943000, 941000, 939000, 937000,
+                    929000, 919000, 911000, 907000, 901000, 893000, 887000)
+"""LH2 rotor period per channel 1..16, ticks of the stations' 48 MHz clock (SPEC §8)."""
+LH2_MAX_STATIONS = len(LH2_PERIOD_TICKS)
+
+
+def lh2_rotor_period_s(channel: int) -> float:
+    """Rotor period (s, the station's clock) of an LH2 station on ``channel`` (1-16)."""
+    return LH2_PERIOD_TICKS[channel - 1] / 48e6
 DEFAULT_CONFIG = "default_simulation.toml"
 
 
@@ -44,21 +58,27 @@ class MotionConfig:
 
 @dataclass(frozen=True)
 class NoiseConfig:
-    """Angle noise (Gaussian, rad), reflections (replaced hits, offset deg) and dropouts."""
+    """Angle noise (Gaussian, rad), reflections (replaced hits, offset deg), dropouts (per
+    hit) and, LH2 only, dropped whole sweeps (one plane of one revolution, all diodes)."""
 
     angle_sigma_rad: float = 0.0
     reflection_fraction: float = 0.0
     reflection_offset_deg: tuple[float, float] = (1.0, 20.0)
     dropout_fraction: float = 0.0
+    sweep_dropout_fraction: float = 0.0
 
 
 @dataclass(frozen=True)
 class VisibilityConfig:
-    """When a diode sees a sweep: incidence, field of view and the sweep window."""
+    """When a diode sees a sweep: incidence, field of view and the sweep window (LH1); LH2:
+    incidence and the field of view ``fov_h_deg`` x ``fov_v_deg`` (half-angles, in the
+    LH1-equivalent azimuth and elevation)."""
 
     max_incidence_deg: float = 75.0
     fov_deg: float = 60.0
     window_ms: tuple[float, float] = (1.2, 6.7)
+    fov_h_deg: float = 70.0
+    fov_v_deg: float = 50.0
 
 
 @dataclass(frozen=True)
@@ -72,7 +92,9 @@ class SimulationConfig:
     ``first_station`` None = drawn at random; ``clock_ppm`` = how much longer the stations'
     rotor period is on the board's clock (ppm), None = drawn at random in +-30 ppm;
     ``logging`` = how the receiver logs its hits (:class:`LoggingConfig`); ``imu`` = the
-    receiver's simulated IMU (:class:`ImuConfig`), None = no IMU stream.
+    receiver's simulated IMU (:class:`ImuConfig`), None = no IMU stream; ``generation`` =
+    1 (LH1 slots, :mod:`lhgraph.sim.simulate`) or 2 (LH2 rotors, :mod:`lhgraph.sim.lh2`;
+    every station model then has ``generation = 2`` and its ``channel``).
     """
 
     duration_s: float = 8.0
@@ -90,6 +112,7 @@ class SimulationConfig:
     base_dir: str | None = None
     logging: LoggingConfig = field(default_factory=LoggingConfig)
     imu: ImuConfig | None = None
+    generation: int = 1
 
     @property
     def n_stations(self) -> int:
@@ -133,8 +156,10 @@ def _parse_stations(value: Any, source: str | Path) -> tuple[tuple[float, ...], 
     return tuple(poses)
 
 
-def _parse_factory(value: Any, source: str | Path, n_stations: int) -> dict[int, StationModel]:
+def _parse_factory(value: Any, source: str | Path, n_stations: int,
+                   generation: int = 1) -> dict[int, StationModel]:
     models = {}
+    channels: dict[int, int] = {}
     for name, item in Table(value, source, "factory").data.items():
         where = f"factory.{name}"
         try:
@@ -148,8 +173,29 @@ def _parse_factory(value: Any, source: str | Path, n_stations: int) -> dict[int,
                   for k in CALIBRATION_KEYS}
         offsets = as_matrix(t.get("rotor_offsets", [[0.0] * 3] * 2), 2, 3, source,
                             t.key("rotor_offsets"))
+        for k in LH2_CALIBRATION_KEYS + ("channel",):
+            if k in t and generation != 2:
+                raise InputError("an LH2 key: set generation = 2", source, t.key(k))
+        if generation == 2:
+            values |= {k: as_vector(t.get(k, [0.0, 0.0]), 2, source, t.key(k))
+                       for k in LH2_CALIBRATION_KEYS}
+            channels[index] = t.integer("channel", index + 1, ge=1, le=LH2_MAX_STATIONS)
         t.finish()
         models[index] = StationModel(FactoryCalibration(**values), offsets)
+    if generation == 2:
+        models = {i: StationModel(models[i].calibration if i in models else FactoryCalibration(),
+                                  models[i].rotor_offsets if i in models else np.zeros((2, 3)),
+                                  generation=2, channel=channels.get(i, i + 1))
+                  for i in range(n_stations)}
+        seen: dict[int, int] = {}
+        for i, model in models.items():
+            if model.channel in seen:
+                j = seen[model.channel]
+                raise InputError(f"stations {j} and {i} both on channel {model.channel} (LH2 "
+                                 "stations in one space need distinct channels; default: "
+                                 "station i on channel i + 1)", source,
+                                 f"factory.{i if i in channels else j}.channel")
+            seen[model.channel] = i
     return models
 
 
@@ -158,6 +204,12 @@ def parse_simulation_config(data: dict[str, Any], source: str | Path,
     """Validate a parsed simulation TOML document; errors name ``source`` and the key."""
     top = Table(data, source, "")
     d = SimulationConfig()
+    generation = top.integer("generation", 1, ge=1, le=2)
+    if generation == 2:  # keys of the LH1 sync/slot schedule and 2 MHz sampler only
+        for key in ("sample_rate_hz", "first_station"):
+            if key in data:
+                raise InputError("an LH1 key (LH2 has no sync flashes and is not sampled by "
+                                 "the board)", source, key)
     duration = top.number("duration_s", d.duration_s, ge=0.1)
     fs = top.number("sample_rate_hz", d.sample_rate_hz, ge=1e5)
     board = top.get("board", d.board)
@@ -175,6 +227,9 @@ def parse_simulation_config(data: dict[str, Any], source: str | Path,
     else:
         layout = _parse_layout(top.table("layout"))
     n_stations = 2 if stations is None else len(stations)
+    if generation == 2 and n_stations > LH2_MAX_STATIONS:
+        raise InputError(f"{n_stations} stations: LH2 has {LH2_MAX_STATIONS} channels", source,
+                         "stations")
 
     first = top.get("first_station", "random")
     if first == "random":
@@ -227,7 +282,9 @@ def parse_simulation_config(data: dict[str, Any], source: str | Path,
         angle_sigma_rad=n.number("angle_sigma_rad", 0.0, ge=0.0, le=0.1),
         reflection_fraction=n.number("reflection_fraction", 0.0, ge=0.0, le=1.0),
         reflection_offset_deg=offset,
-        dropout_fraction=n.number("dropout_fraction", 0.0, ge=0.0, le=1.0))
+        dropout_fraction=n.number("dropout_fraction", 0.0, ge=0.0, le=1.0),
+        sweep_dropout_fraction=n.number("sweep_dropout_fraction", 0.0, ge=0.0, le=1.0))
+    _refuse_other_generation(n, generation, lh1=(), lh2=("sweep_dropout_fraction",))
     n.finish()
 
     v = top.table("visibility")
@@ -237,16 +294,34 @@ def parse_simulation_config(data: dict[str, Any], source: str | Path,
                          source, v.key("window_ms"))
     visibility = VisibilityConfig(
         max_incidence_deg=v.number("max_incidence_deg", 75.0, ge=0.0, le=90.0),
-        fov_deg=v.number("fov_deg", 60.0, ge=0.0, le=89.0), window_ms=window)
+        fov_deg=v.number("fov_deg", 60.0, ge=0.0, le=89.0), window_ms=window,
+        fov_h_deg=v.number("fov_h_deg", VisibilityConfig.fov_h_deg, ge=0.0, le=89.0),
+        fov_v_deg=v.number("fov_v_deg", VisibilityConfig.fov_v_deg, ge=0.0, le=89.0))
+    _refuse_other_generation(v, generation, lh1=("fov_deg", "window_ms"),
+                             lh2=("fov_h_deg", "fov_v_deg"))
     v.finish()
 
-    models = _parse_factory(top.get("factory", {}), source, n_stations)
+    models = _parse_factory(top.get("factory", {}), source, n_stations, generation)
     logging = top.options("logging", LoggingConfig)
+    if generation == 2 and logging.timestamps == "deck":
+        raise InputError("\"deck\" logging is LH1's (a deck's LH2 log is not simulated); use "
+                         "\"hit\"", source, "logging.timestamps")
     imu = top.options("imu", ImuConfig) if "imu" in data else None
     top.finish()
     return SimulationConfig(duration, fs, board, layout, stations, motion, noise, visibility,
                             models, first_station, clock_ppm, seed,
-                            None if base_dir is None else str(base_dir), logging, imu)
+                            None if base_dir is None else str(base_dir), logging, imu,
+                            generation)
+
+
+def _refuse_other_generation(t: Table, generation: int, lh1: tuple[str, ...],
+                             lh2: tuple[str, ...]) -> None:
+    """InputError for a key of ``t`` that only the other generation uses."""
+    for key in lh1 if generation == 2 else lh2:
+        if key in t:
+            other = "LH1" if generation == 2 else "LH2"
+            hint = "" if generation == 2 else ": set generation = 2"
+            raise InputError(f"an {other} key{hint}", t.source, t.key(key))
 
 
 def load_simulation_config(path: str | Path) -> SimulationConfig:

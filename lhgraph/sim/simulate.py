@@ -1,4 +1,5 @@
-"""Capture simulator: Lighthouse v1 sweeps seen by a waved photodiode board (docs/simulator.md).
+"""Capture simulator: Lighthouse v1 sweeps seen by a waved photodiode board (docs/simulator.md);
+LH2 (``generation = 2``) is simulated by :mod:`lhgraph.sim.lh2`, which :func:`simulate` calls.
 
 Models the LH1 slot schedule (one axis of one station swept per T/2 slot, every station
 flashing a sync in every slot, 20000 ticks of 48 MHz apart), solves each hit time on the
@@ -15,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from lhgraph.errors import InputError
 from lhgraph.geometry.transforms import inverse, pose_from_quat, transform_points
 from lhgraph.io.angles import Angles, save_angles
 from lhgraph.io.files import check_writable
@@ -23,7 +25,7 @@ from lhgraph.io.stations import Station, Stations, save_stations
 from lhgraph.io.trajectory import Trajectory, save_trajectory
 from lhgraph.model.board import Board, save_board
 from lhgraph.model.boards import board_by_name
-from lhgraph.model.lh1 import StationModel, ideal_angles, sweep_angle
+from lhgraph.model.station import StationModel, ideal_angles, sweep_angle
 from lhgraph.signal.pulses import LightPulses
 from lhgraph.sim.config import (
     ROTOR_PERIOD_S,
@@ -43,8 +45,8 @@ from lhgraph.sim.motion import Motion, facing_rotation, make_motion
 # the configuration API (lhgraph.sim.config) is part of the simulator's entry point
 __all__ = ["SimulatedCapture", "SimulationConfig", "SweepSlots", "default_simulation_config",
            "load_simulation_config", "paper_protocol", "parse_simulation_config",
-           "pulse_width_s", "scene_of", "schedule", "simulate", "solve_hit_times",
-           "write_simulation"]
+           "pulse_width_s", "scene_of", "schedule", "simulate", "solve_crossing_times",
+           "solve_hit_times", "write_simulation"]
 
 STATION_CLOCK_HZ = 48e6
 SYNC_SPACING_S = 20000 / STATION_CLOCK_HZ  # between consecutive stations' sync flashes
@@ -84,15 +86,16 @@ class SimulatedCapture:
     ``angles`` has the contract columns plus ``extra["sweep"]`` (slot k of each hit);
     ``reflected`` (len(angles),) marks rows that come from a reflection (gross outliers);
     ``motion`` is the exact board motion (``trajectory`` samples it every 1 ms);
-    ``n_samples`` is the capture length in samples.
+    ``n_samples`` is the capture length in samples. ``pulses`` and ``slots`` (the raw
+    signal) are None for an LH2 capture (no sync slots, not sampled by the board).
     """
 
     angles: Angles
     board: Board
     truth: Stations
     trajectory: Trajectory
-    pulses: LightPulses
-    slots: SweepSlots
+    pulses: LightPulses | None
+    slots: SweepSlots | None
     config: SimulationConfig
     reflected: NDArray[np.bool_]
     motion: Motion
@@ -103,8 +106,12 @@ class SimulatedCapture:
         """One line: hits per station and duration."""
         counts = ", ".join(f"station {k}: {int(np.sum(self.angles.lighthouse == k))}"
                            for k in self.truth.indices())
-        return (f"{len(self.angles)} hits ({counts}) in {self.config.duration_s:g} s, "
-                f"{len(self.slots)} sweeps")
+        if self.slots is not None:
+            sweeps = f"{len(self.slots)} sweeps"
+        else:  # LH2: the (station, sweep) pairs that hit a diode
+            seen = np.unique(np.c_[self.angles.lighthouse, self.angles.extra["sweep"]], axis=0)
+            sweeps = f"LH2, {len(seen)} sweeps seen"
+        return f"{len(self.angles)} hits ({counts}) in {self.config.duration_s:g} s, {sweeps}"
 
 
 # --- simulation ---------------------------------------------------------------------------
@@ -154,20 +161,36 @@ def solve_hit_times(motion: Motion, T_world_lh: NDArray, models: list[StationMod
                     s_board: NDArray, t_sync: NDArray, station: NDArray, axis: NDArray,
                     period_s: float = ROTOR_PERIOD_S, tol_s: float = 1e-12,
                     ) -> tuple[NDArray, NDArray, NDArray]:
-    """Times at which each sweeping plane passes a moving diode (fixed-point iteration).
+    """Times at which each sweeping LH1 plane passes a moving diode.
 
     For candidate hits (sensor ``s_board`` (N, 3) board frame, sweeping ``station`` and
     ``axis``, sync start ``t_sync`` (s)) solve ``t = t_sync + T/4 + angle(p_lh(t)) T / 2pi``
-    on the exact motion. Returns ``t`` (N,), ``T_world_board`` (N, 4, 4) at ``t`` and the
-    station-frame positions (N, 3). Contraction factor ~ (speed / distance) T / 2pi << 1.
+    (:func:`solve_crossing_times` with the plane at angle 0 a quarter turn after the sync).
+    """
+    return solve_crossing_times(motion, T_world_lh, models, s_board, t_sync + period_s / 4,
+                                station, axis, period_s, tol_s)
+
+
+def solve_crossing_times(motion: Motion, T_world_lh: NDArray, models: list[StationModel],
+                         s_board: NDArray, t_zero: NDArray, station: NDArray, axis: NDArray,
+                         period_s: float | NDArray = ROTOR_PERIOD_S, tol_s: float = 1e-12,
+                         ) -> tuple[NDArray, NDArray, NDArray]:
+    """Times at which rotating light planes pass moving diodes (fixed-point iteration).
+
+    For candidate hits (sensor ``s_board`` (N, 3) board frame, ``station`` and ``axis``,
+    ``t_zero`` (s) the time the plane is at measured angle 0, ``period_s`` the rotor period,
+    scalar or (N,)) solve ``t = t_zero + angle(p_lh(t)) T / 2pi`` on the exact motion, with
+    ``angle`` the station's model (:func:`lhgraph.model.station.sweep_angle`). Returns ``t``
+    (N,), ``T_world_board`` (N, 4, 4) at ``t`` and the station-frame positions (N, 3).
+    Contraction factor ~ (speed / distance) T / 2pi << 1.
     """
     T_lh_world = inverse(T_world_lh)[station]
-    t = t_sync + period_s / 4
+    t = t_zero
     for _ in range(20):
         T_world_board = motion.pose(t)
         p_lh = transform_points(T_lh_world, transform_points(T_world_board, s_board))
         angle = _station_angles(p_lh, station, axis, models)
-        t_new = t_sync + period_s / 4 + angle * period_s / (2 * np.pi)
+        t_new = t_zero + angle * period_s / (2 * np.pi)
         converged = np.max(np.abs(t_new - t), initial=0.0) < tol_s
         t = t_new
         if converged:
@@ -188,7 +211,12 @@ def pulse_width_s(distance_m: NDArray) -> NDArray:
 
 
 def simulate(config: SimulationConfig, seed: int | None = None) -> SimulatedCapture:
-    """Simulate a capture of ``config`` (``seed`` overrides ``config.seed``)."""
+    """Simulate a capture of ``config`` (``seed`` overrides ``config.seed``): LH1 slots here,
+    LH2 rotors (``config.generation == 2``) by :func:`lhgraph.sim.lh2.simulate_lh2`."""
+    if config.generation == 2:
+        from lhgraph.sim.lh2 import simulate_lh2
+
+        return simulate_lh2(config, seed)
     rng = np.random.default_rng(config.seed if seed is None else seed)
     config = config if seed is None else replace(config, seed=seed)
     fs = config.sample_rate_hz
@@ -224,7 +252,8 @@ def simulate(config: SimulationConfig, seed: int | None = None) -> SimulatedCapt
     keep &= rng.random(len(keep)) >= config.noise.dropout_fraction
     k, row, station, axis, t, t_sync = (x[keep] for x in (k, row, station, axis, t, t_sync))
 
-    t, reflected = _timing_noise(config, t, t_sync, period_s, rng)
+    window = np.asarray(config.visibility.window_ms) * 1e-3
+    t, reflected = _timing_noise(config, t, period_s, rng, t_sync, window)
     half = pulse_width_s(np.linalg.norm(p_lh[keep], axis=1)) / 2
     start = np.ceil((t - half) * fs).astype(np.int64)
     end = np.maximum(np.ceil((t + half) * fs).astype(np.int64), start + 1)
@@ -253,28 +282,41 @@ def simulate(config: SimulationConfig, seed: int | None = None) -> SimulatedCapt
     kind = np.where(reflected, LightPulses.REFLECTION, LightPulses.SWEEP).astype(np.int64)
     pulses = LightPulses(board.ids[row], start, end, kind)
 
+    truth, trajectory, imu = truth_and_imu(
+        config, scene, models, motion,
+        {"seed": int(config.seed), "first_station": first, "clock_ppm": ppm,
+         "rotor_period_s": period_s, "up": [float(x) for x in scene.up]})
+    return SimulatedCapture(angles, board, truth, trajectory, pulses, slots, config, reflected,
+                            motion, n_samples, imu)
+
+
+def truth_and_imu(config: SimulationConfig, scene: Scene, models: list[StationModel],
+                  motion: Motion, simulation: dict
+                  ) -> tuple[Stations, Trajectory, SimulatedImu | None]:
+    """The truth stations (``[simulation]`` table ``simulation``, plus the IMU's bias and
+    gravity), the 1 ms truth trajectory and the simulated IMU (``config.imu``; None without)."""
     t_traj = np.arange(int(config.duration_s * TRAJECTORY_RATE_HZ) + 1) / TRAJECTORY_RATE_HZ
-    extra = {"simulation": {"seed": int(config.seed), "first_station": first,
-                            "clock_ppm": ppm, "rotor_period_s": period_s,
-                            "up": [float(x) for x in scene.up]}}
+    extra = {"simulation": simulation}
     imu = None
     if config.imu is not None:  # its own random stream: the light is the same with or without
         imu = imu_of_motion(motion, scene.up, config.duration_s, config.imu,
                             np.random.default_rng([int(config.seed), IMU_STREAM]))
         extra["simulation"] |= {"imu_bias": [float(x) for x in imu.bias],
                                 "gravity": [float(x) for x in imu.gravity]}
-    truth = Stations(0, {i: Station(scene.T_world_lh[i], None, models[i]) for i in range(n)},
-                     extra)
-    return SimulatedCapture(angles, board, truth, Trajectory(t_traj, motion.pose(t_traj)),
-                            pulses, slots, config, reflected, motion, n_samples, imu)
+    truth = Stations(0, {i: Station(scene.T_world_lh[i], None, models[i])
+                         for i in range(len(models))}, extra)
+    return truth, Trajectory(t_traj, motion.pose(t_traj)), imu
 
 
-def _timing_noise(config: SimulationConfig, t: NDArray, t_sync: NDArray, period_s: float,
-                  rng: np.random.Generator) -> tuple[NDArray, NDArray[np.bool_]]:
+def _timing_noise(config: SimulationConfig, t: NDArray, period_s: float | NDArray,
+                  rng: np.random.Generator, t_sync: NDArray | None = None,
+                  window_s: NDArray | None = None) -> tuple[NDArray, NDArray[np.bool_]]:
     """Hit times with Gaussian angle noise and reflections, and the reflection mask.
 
     A reflection replaces the direct hit by one offset by ``reflection_offset_deg`` (random
-    sign, flipped when that keeps it inside the sweep window).
+    sign; with the LH1 sweep window ``window_s`` = (start, end) after the sweeping station's
+    sync start ``t_sync``, flipped when that keeps it inside). ``period_s`` is scalar or per
+    hit.
     """
     noise = config.noise
     rad_to_s = period_s / (2 * np.pi)
@@ -282,22 +324,30 @@ def _timing_noise(config: SimulationConfig, t: NDArray, t_sync: NDArray, period_
     reflected = rng.random(len(t)) < noise.reflection_fraction
     lo, hi = np.radians(noise.reflection_offset_deg)
     offset = rng.uniform(lo, hi, len(t)) * rng.choice([-1.0, 1.0], len(t)) * rad_to_s
-    w0, w1 = np.asarray(config.visibility.window_ms) * 1e-3
+    if window_s is None or t_sync is None:
+        return np.where(reflected, t + offset, t), reflected
+    w0, w1 = window_s
     inside = (t + offset - t_sync >= w0) & (t + offset - t_sync <= w1)
     return np.where(reflected, t + np.where(inside, offset, -offset), t), reflected
 
 
-def _visible(vis: VisibilityConfig, scene: Scene, board: Board, row: NDArray, station: NDArray,
-             dt_s: NDArray, T_world_board: NDArray, p_lh: NDArray) -> NDArray[np.bool_]:
-    """Candidate hits a diode really sees: facing, in the field of view, in the window."""
+def _facing(vis: VisibilityConfig, scene: Scene, board: Board, row: NDArray, station: NDArray,
+            T_world_board: NDArray, p_lh: NDArray) -> NDArray[np.bool_]:
+    """Candidate hits whose diode faces the station (incidence below ``max_incidence_deg``)
+    and that are in front of it (x > 0)."""
     p_world = transform_points(T_world_board, board.positions[row])
     n_world = np.einsum("nij,nj->ni", T_world_board[:, :3, :3], board.normals[row])
     to_station = scene.T_world_lh[station, :3, 3] - p_world
     cos_inc = np.sum(n_world * to_station, axis=1) / np.linalg.norm(to_station, axis=1)
+    return (cos_inc > np.cos(np.radians(vis.max_incidence_deg))) & (p_lh[:, 0] > 0)
+
+
+def _visible(vis: VisibilityConfig, scene: Scene, board: Board, row: NDArray, station: NDArray,
+             dt_s: NDArray, T_world_board: NDArray, p_lh: NDArray) -> NDArray[np.bool_]:
+    """Candidate LH1 hits a diode really sees: facing, in the field of view, in the window."""
     ideal = ideal_angles(p_lh)
     w0, w1 = np.asarray(vis.window_ms) * 1e-3
-    return ((cos_inc > np.cos(np.radians(vis.max_incidence_deg)))
-            & (p_lh[:, 0] > 0)
+    return (_facing(vis, scene, board, row, station, T_world_board, p_lh)
             & np.all(np.abs(ideal) <= np.radians(vis.fov_deg), axis=1)
             & (dt_s >= w0) & (dt_s <= w1))
 
@@ -319,6 +369,9 @@ def write_simulation(capture: SimulatedCapture, out_dir: str | Path,
     """
     from lhgraph.sim.capture_sim import CAPTURE_FILE, write_simulated_capture
 
+    if raw_capture and capture.config.generation == 2:
+        raise InputError("no raw capture of LH2: the board's 2 MHz sampler cannot decode LH2 "
+                         "(SPEC §8; ~6 Mbit/s bitstream)", where="--capture")
     out_dir = Path(out_dir)
     paths = {key: out_dir / name for key, name in OUTPUT_FILES.items()}
     if capture.imu is not None:

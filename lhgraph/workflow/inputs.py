@@ -18,7 +18,7 @@ from lhgraph.io.angles import Angles, load_angles
 from lhgraph.io.imu import ImuStream, load_imu
 from lhgraph.model.board import Board, load_board
 from lhgraph.model.calibration import StationCalibration, load_calibration
-from lhgraph.model.lh1 import Convention, StationModel
+from lhgraph.model.station import Convention, StationModel
 from lhgraph.workflow.solve_config import SolveConfig
 
 
@@ -33,9 +33,7 @@ def station_models(calibration_path: str | Path | None,
 def models_of(calibrations: dict[int, StationCalibration],
               convention: Convention | None = None) -> dict[int, StationModel]:
     """Station models (by index) from decoded or loaded factory calibrations."""
-    convention = convention or Convention()
-    return {k: StationModel(c.calibration, convention=convention)
-            for k, c in calibrations.items()}
+    return {k: c.model(convention) for k, c in calibrations.items()}
 
 
 @dataclass

@@ -30,7 +30,7 @@ from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
 from lhgraph.model.board import Board
-from lhgraph.model.lh1 import StationModel
+from lhgraph.model.station import StationModel
 from lhgraph.workflow.inputs import check_inputs, load_inputs
 from lhgraph.workflow.solve_config import SolveConfig
 

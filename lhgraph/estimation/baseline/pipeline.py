@@ -22,7 +22,7 @@ from lhgraph.io.angles import Angles
 from lhgraph.io.stations import Station, Stations
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.board import Board
-from lhgraph.model.lh1 import IDEAL, StationModel, predict
+from lhgraph.model.station import IDEAL, StationModel, predict
 
 
 def hit_residuals(angles: Angles, board: Board, stations: Stations, trajectory: Trajectory

@@ -33,13 +33,13 @@ from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp_kabsch import Initialisation, PnPKabschInitialiser
 from lhgraph.estimation.problem import GraphProblem, build_problem
 from lhgraph.estimation.result import Residuals, SolveResult
-from lhgraph.estimation.sweep_times import co_logged_stations, retime_cycles
+from lhgraph.estimation.sweep_times import co_logged_stations, plane_cycles, retime_cycles
 from lhgraph.io.angles import Angles
 from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import Station, Stations
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.board import Board
-from lhgraph.model.lh1 import StationModel
+from lhgraph.model.station import StationModel
 
 Array = NDArray[np.float64]
 Progress = Callable[[str], None]
@@ -79,7 +79,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         raise SolverError(f"only station(s) {stations} seen: need at least two")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    angles, options, few = few_diode_preparation(angles, options, progress)
+    angles, options, few = few_diode_preparation(angles, options, progress, models)
     problem = build_problem(board, angles, models, reference)
     if initialiser is None:
         initialiser = FewDiodeInitialiser() if few else PnPKabschInitialiser()
@@ -133,17 +133,25 @@ def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation
 
 
 def few_diode_preparation(angles: Angles, options: GraphOptions,
-                          progress: Progress | None = None
+                          progress: Progress | None = None,
+                          models: dict[int, StationModel] | None = None
                           ) -> tuple[Angles, GraphOptions, bool]:
     """``angles``, ``options`` and whether the data is few-diode, made ready for the graph:
-    the sweeps of few-diode data, or of a receiver that logs a station's two sweeps together,
-    on each station's rotor grid with one board state per rotor cycle
-    (``options.sweep_times``, :func:`retime_cycles`), and on few-diode data the angle-noise
+    the LH1 sweeps of few-diode data, or of a receiver that logs a station's two sweeps
+    together, on each station's rotor grid with one board state per rotor cycle
+    (``options.sweep_times``, :func:`retime_cycles`; with LH2 stations in ``models``, whose
+    hit times the importer derives from the planes' rotor angles, both planes of a turn
+    share a state: :func:`plane_cycles`), and on few-diode data the angle-noise
     floor ``few_diode_sigma_rad`` and, unless set, the stopping rule's board-step quantile
     ``FEW_DIODE_STEP_QUANTILE``. Shared by the calibration and by tracking."""
     few = few_diode(angles)
     logged = co_logged_stations(angles)
-    if options.sweep_times == "auto" and (few or logged):
+    lh2 = any(m.generation == 2 for m in (models or {}).values())
+    if options.sweep_times == "auto" and few and lh2:
+        angles = plane_cycles(angles)
+        if progress:
+            progress("both light planes of a rotor turn share one board state")
+    elif options.sweep_times == "auto" and (few or logged) and not lh2:
         angles = retime_cycles(angles, logged)
         if progress:
             progress("sweeps put on each station's rotor grid, one board state per cycle")

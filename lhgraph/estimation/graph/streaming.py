@@ -58,7 +58,7 @@ from lhgraph.io.angles import Angles
 from lhgraph.io.stations import Stations
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.board import Board
-from lhgraph.model.lh1 import StationModel
+from lhgraph.model.station import StationModel
 
 Array = NDArray[np.float64]
 DELAY_S = 0.1

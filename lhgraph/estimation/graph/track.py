@@ -50,7 +50,7 @@ from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import Stations
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.board import Board
-from lhgraph.model.lh1 import StationModel
+from lhgraph.model.station import StationModel
 
 Array = NDArray[np.float64]
 Progress = Callable[[str], None]
@@ -240,7 +240,9 @@ def track(board: Board, angles: Angles, stations: Stations,
     angular rates are the gyro's, and the IMU bias and the world's gravity are estimated."""
     options = options or GraphOptions()
     t0 = time.perf_counter()
-    angles, options, few = few_diode_preparation(angles, options, progress)
+    angles, options, few = few_diode_preparation(
+        angles, options, progress, models or {k: stations.stations[k].model
+                                              for k in stations.indices()})
     problem, T_world_lh = tracking_problem(board, angles, stations, models)
     if few:
         init = FewDiodeInitialiser(cross_max_gap_s=TRACK_CROSS_GAP_S).with_stations(

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.geometry.transforms import cross, make_pose, se3_exp, so3_exp
-from lhgraph.model.lh1 import IDEAL, StationModel, board_jacobian, sweep_angle
+from lhgraph.model.station import IDEAL, StationModel, board_jacobian, sweep_angle
 
 Array = NDArray[np.float64]
 

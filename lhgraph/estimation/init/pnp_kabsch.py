@@ -135,11 +135,15 @@ def join_paths(board: Board, problem: GraphProblem, paths: list[tuple[Array, Arr
 
 
 def world_states(paths: list[tuple[Array, Array, Array]], T_world_lh: Array, t: Array,
-                 velocity_span_s: float = 0.01) -> tuple[Array, Array]:
+                 velocity_span_s: float = 0.01, twist_per_path: bool = False
+                 ) -> tuple[Array, Array]:
     """Board poses ``T_world_board`` (K, 4, 4) and body twists (K, 6) at times ``t`` (K,) (s)
     from every station slot's path (:func:`station_paths`) put into the world by its
     ``T_world_lh`` (S, 4, 4) and merged by time: poses interpolated (clamped at the ends),
-    twists by central differences over ``velocity_span_s`` on the merged path."""
+    twists by central differences over ``velocity_span_s`` on the merged path, or with
+    ``twist_per_path`` on each station's own path, the merged twists then interpolated: two
+    stations that see the board at once (LH2) place it a few cm apart before the solve, and
+    differences across their interleaved paths would read as metres per second."""
     times = np.concatenate([p[0] for p in paths])
     T_all = np.concatenate([T_world_lh[slot] @ path[1] for slot, path in enumerate(paths)])
     order = np.argsort(times, kind="stable")
@@ -147,9 +151,26 @@ def world_states(paths: list[tuple[Array, Array, Array]], T_world_lh: Array, t: 
     keep = np.r_[True, np.diff(times) > 0]
     # states may be closer together than the span
     h = 0.5 * velocity_span_s
-    X0, before, after = interpolate_poses(times[keep], T_all[keep],
-                                          np.concatenate([t, t - h, t + h])).reshape(3, -1, 4, 4)
-    return X0, se3_log(inverse(before) @ after) / (2 * h)
+    if not twist_per_path:
+        X0, before, after = interpolate_poses(
+            times[keep], T_all[keep], np.concatenate([t, t - h, t + h])).reshape(3, -1, 4, 4)
+        return X0, se3_log(inverse(before) @ after) / (2 * h)
+    X0 = interpolate_poses(times[keep], T_all[keep], t)
+    t_twist, twists = [], []
+    for slot, (t_p, T_p, _) in enumerate(paths):
+        if len(t_p) < 2:
+            continue
+        world = T_world_lh[slot] @ T_p
+        before, after = interpolate_poses(t_p, world, np.r_[t_p - h, t_p + h]).reshape(
+            2, -1, 4, 4)
+        t_twist.append(t_p)
+        twists.append(se3_log(inverse(before) @ after) / (2 * h))
+    if not twists:
+        return X0, np.zeros((len(t), 6))
+    t_all, V_all = np.concatenate(t_twist), np.concatenate(twists)
+    order = np.argsort(t_all, kind="stable")
+    t_all, V_all = t_all[order], V_all[order]
+    return X0, np.stack([np.interp(t, t_all, V_all[:, j]) for j in range(6)], axis=1)
 
 
 @dataclass(frozen=True)

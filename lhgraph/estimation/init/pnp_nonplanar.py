@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from lhgraph.estimation.init.pnp import PnPResult, facing_fraction
 from lhgraph.geometry.transforms import make_pose, se3_exp
-from lhgraph.model.lh1 import StationModel, predict
+from lhgraph.model.station import StationModel, predict
 
 Array = NDArray[np.float64]
 

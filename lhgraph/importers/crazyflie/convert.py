@@ -23,18 +23,19 @@ from lhgraph.importers.crazyflie.sweeps import (
     LH2_MAX_INTERVAL_S,
     SweepSummary,
     lh1_angles,
+    lh2_angles,
     sweep_interval_s,
 )
 from lhgraph.importers.crazyflie.usdlog import UsdLog, read_usd_log
 from lhgraph.io.angles import save_angles
-from lhgraph.io.cfclient import LH2_PENDING, SystemConfig, read_system_config
+from lhgraph.io.cfclient import SYSTEM_TYPES, SystemConfig, read_system_config
 from lhgraph.io.files import check_writable, write_csv_columns
 from lhgraph.io.imu import STANDARD_GRAVITY_MPS2, ImuStream, save_imu
 from lhgraph.io.stations import Station, Stations, save_stations
 from lhgraph.model.board import save_board
 from lhgraph.model.boards import crazyflie_deck
 from lhgraph.model.calibration import save_calibration
-from lhgraph.model.lh1 import StationModel
+from lhgraph.model.station import StationModel
 
 IMU_VARIABLES = ("acc.x", "acc.y", "acc.z", "gyro.x", "gyro.y", "gyro.z")
 
@@ -49,12 +50,14 @@ class CrazyflieImport:
     sweeps: SweepSummary
     duration_s: float
     imu_rate_hz: float
+    system_type: int = 1
     mocap: Mocap | None = None
     skipped: tuple[str, ...] = field(default=())
 
     def summary(self) -> str:
         """Human-readable lines."""
-        lines = [f"uSD log version {self.version}; LH1; duration {self.duration_s:.1f} s"]
+        lines = [f"uSD log version {self.version}; {SYSTEM_TYPES[self.system_type]}; "
+                 f"duration {self.duration_s:.1f} s"]
         lines += [f"log: {n}" for n in self.notes]
         lines += self.sweeps.lines()
         lines.append(f"imu: {self.imu_rate_hz:.1f} Hz")
@@ -74,21 +77,20 @@ def default_mocap_path(log_path: str | Path) -> Path | None:
     return candidate if candidate is not None and candidate.is_file() else None
 
 
-def check_lh1(log: UsdLog, source: str | Path) -> None:
-    """InputError unless ``log`` holds LH1 angles (LH2 logs are refused, one line)."""
+def system_type(log: UsdLog, source: str | Path) -> int:
+    """1 (LH1) or 2 (LH2) from how often a station's sweeps of ``log`` come (LH1: every
+    33.3 ms; LH2: every rotor turn, 18.5-20 ms); InputError without angles."""
     if log.count("lhAngle") == 0:
         raise InputError("no lhAngle events in the log", source)
-    interval = sweep_interval_s(log)
-    if interval < LH2_MAX_INTERVAL_S:
-        raise InputError(f"an LH2 log (a station's sweeps every {interval * 1e3:.1f} ms, LH1: "
-                         f"33.3 ms): {LH2_PENDING}", source)
+    return 2 if sweep_interval_s(log) < LH2_MAX_INTERVAL_S else 1
 
 
 def _stations(config: SystemConfig) -> Stations:
     cals = config.calibrations
     return Stations(
         min(config.T_world_lh),
-        {k: Station(T, None, StationModel(cals[k].calibration) if k in cals else StationModel())
+        {k: Station(T, None, cals[k].model() if k in cals
+                    else StationModel(generation=config.system_type))
          for k, T in config.T_world_lh.items()},
         {"world": "cfclient"})
 
@@ -96,10 +98,11 @@ def _stations(config: SystemConfig) -> Stations:
 def import_crazyflie(log_path: str | Path, out_dir: str | Path,
                      system_config: str | Path | None = None, mocap: str | Path | None = None,
                      overwrite: bool = False) -> CrazyflieImport:
-    """Convert a Crazyflie uSD log (LH1) into ``angles.csv``, ``board.toml``, ``imu.csv``,
-    with a system configuration ``ootx.toml`` and ``stations-cfclient.toml``, with a mocap
-    recording (default: ``mocapNN.npy`` beside ``logNN``) ``mocap.csv``; refuses to replace
-    files unless ``overwrite``."""
+    """Convert a Crazyflie uSD log (LH1 or LH2, told apart by the sweeps' rate) into
+    ``angles.csv``, ``board.toml``, ``imu.csv``, with a system configuration ``ootx.toml``
+    and ``stations-cfclient.toml``, with a mocap recording (default: ``mocapNN.npy`` beside
+    ``logNN``) ``mocap.csv``; refuses to replace files unless ``overwrite`` (InputError when
+    the configuration's system type is not the log's)."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError("exists and is not a directory", out)
@@ -110,13 +113,17 @@ def import_crazyflie(log_path: str | Path, out_dir: str | Path,
     names += ["mocap.csv"] if mocap is not None else []
     paths = {name.rsplit(".", 1)[0]: out / name for name in names}
     log = read_usd_log(log_path)
-    check_lh1(log, log_path)
+    generation = system_type(log, log_path)
+    if config is not None and config.system_type != generation:
+        raise InputError(f"the system configuration is {SYSTEM_TYPES[config.system_type]} "
+                         f"(systemType {config.system_type}) but the log holds "
+                         f"{SYSTEM_TYPES[generation]} sweeps", system_config)
     for p in paths.values():
         check_writable(p, overwrite)
     aligned = None
     if mocap is not None:
         aligned = align_mocap(read_mocap_npy(mocap), *marker_events_s(log, log_path))
-    angles, sweeps = lh1_angles(log)
+    angles, sweeps = lh2_angles(log) if generation == 2 else lh1_angles(log)
     save_angles(angles, paths["angles"], overwrite)
     save_board(crazyflie_deck(), paths["board"], overwrite)
     imu_rate = 0.0
@@ -149,4 +156,4 @@ def import_crazyflie(log_path: str | Path, out_dir: str | Path,
         skipped.append("mocap.csv (no mocapNN.npy beside the log, no --mocap)")
     return CrazyflieImport(paths, log.version, log.notes, sweeps,
                            float(angles.time[-1] - angles.time[0]) if len(angles) else 0.0,
-                           float(imu_rate), aligned, tuple(skipped))
+                           float(imu_rate), generation, aligned, tuple(skipped))

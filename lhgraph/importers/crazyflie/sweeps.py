@@ -1,5 +1,5 @@
-"""The log's ``lhAngle`` events as an angles table (:func:`lh1_angles`), and the system type
-they come from (:func:`sweep_interval_s`).
+"""The log's ``lhAngle`` events as an angles table (:func:`lh1_angles`, :func:`lh2_angles`),
+and the system type they come from (:func:`sweep_interval_s`).
 
 What the log holds (measured on the real LH1 log, docs/crazyflie.md): the deck firmware logs
 the latest angle pair (both sweeps) of every base station each time one station's pair
@@ -26,6 +26,8 @@ from numpy.typing import NDArray
 from lhgraph.importers.crazyflie.usdlog import UsdLog
 from lhgraph.io.angles import Angles
 
+Array = NDArray[np.float64]
+
 ROTOR_PERIOD_S = 1.0 / 60.0
 SLOT_S = ROTOR_PERIOD_S / 2
 """One LH1 sweep slot (half a rotor turn), s."""
@@ -34,6 +36,10 @@ LOG_DELAY_S = 0.18e-3
 the real log, benchmarks/crazyflie_log_evidence.py)."""
 LH2_MAX_INTERVAL_S = 0.025
 """LH1 sweeps a station's axis every 33.3 ms; LH2 rotors turn every 18.5-20 ms."""
+LH2_PERIOD_RANGE_S = (0.0184, 0.0201)
+"""The 16 LH2 channels' rotor periods (SPEC §8), s."""
+BURST_GAP_S = 1e-3
+"""The deck logs a measurement's events within a burst of < 1 ms; bursts are >= 6 ms apart."""
 
 
 @dataclass(frozen=True)
@@ -87,6 +93,13 @@ def sweep_interval_s(log: UsdLog) -> float:
     return float(np.median(dt)) if len(dt) else float("nan")
 
 
+def _summary(a: NDArray, station: NDArray, repeat: NDArray, finite: NDArray) -> SweepSummary:
+    stations = np.unique(a["basestation"]).astype(int)
+    kept = {int(s): int(np.sum(station == s)) for s in stations}
+    repeats = {int(s): int(np.sum(repeat & (a["basestation"] == s))) for s in stations}
+    return SweepSummary(kept, repeats, int(np.sum(~finite & ~repeat)))
+
+
 def lh1_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
     """The angles table of an LH1 log: station = the log's base-station index, axis = its
     sweep (0 horizontal = azimuth, 1 vertical = elevation), ``angle`` as measured; extra
@@ -107,7 +120,53 @@ def lh1_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
                     angle[order],
                     {"corrected_angle": k["correctedAngle"].astype(float)[order],
                      "log_time": t[keep][order]})
-    stations = np.unique(a["basestation"]).astype(int)
-    kept = {int(s): int(np.sum(station == s)) for s in stations}
-    repeats = {int(s): int(np.sum(repeat & (a["basestation"] == s))) for s in stations}
-    return angles, SweepSummary(kept, repeats, int(np.sum(~finite & ~repeat)))
+    return angles, _summary(a, station, repeat, finite)
+
+
+def lh2_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
+    """The angles table of an LH2 log: station = the log's base-station index, axis = its
+    sweep (0 = the first light plane, tilted -30°; 1 = the second, +30°), ``angle`` as
+    measured; extra columns ``corrected_angle`` and ``log_time`` as :func:`lh1_angles`.
+    Repeats (a station's last measurement logged again with another station's: measured on
+    the real log, docs/crazyflie.md) and non-finite angles are dropped and counted.
+
+    Hit time: the deck logs a diode's two planes when the second has passed; within one
+    revolution of period ``T`` (each station's median spacing of measurements) plane i
+    crosses at rotor time ``(angle_i + 2 pi (i + 1) / 3) T / 2 pi`` (the deck's angle
+    offsets of the two planes), so a plane-0 hit is moved back from the stamp by
+    ``(angle_1 - angle_0 + 2 pi / 3) T / 2 pi`` (~6.7 ms) with the same diode's plane-1 angle
+    of the burst (its own angle when that is missing); a plane-1 hit keeps its stamp (a
+    common logging delay stays: it shifts every state alike)."""
+    a, t = _angle_events(log)
+    repeat = repeated_hits(log)
+    finite = np.isfinite(a["angle"]) & np.isfinite(a["correctedAngle"])
+    keep = ~repeat & finite
+    k, t = a[keep], t[keep]
+    station = k["basestation"].astype(np.int64)
+    axis = k["sweep"].astype(np.int64)
+    sensor = k["sensor"].astype(np.int64)
+    angle = k["angle"].astype(float)
+    burst = np.r_[0, np.cumsum(np.diff(t) > BURST_GAP_S)]
+    # the plane-1 angle of each hit's diode in its burst
+    key = (burst * 256 + station) * 256 + sensor
+    plane1 = dict(zip(key[axis == 1].tolist(), angle[axis == 1].tolist(), strict=True))
+    a1 = np.array([plane1.get(kk, aa) for kk, aa in zip(key.tolist(), angle.tolist(),
+                                                       strict=True)])
+    period = np.array([_rotor_period(t[station == s], burst[station == s])
+                       for s in range(int(station.max(initial=-1)) + 1)])
+    behind = np.where(axis == 0, a1 - angle + 2 * np.pi / 3, a1 - angle)
+    time = t - behind * period[station] / (2 * np.pi) if len(t) else t
+    order = np.argsort(time, kind="stable")
+    angles = Angles(time[order], station[order], axis[order], sensor[order], angle[order],
+                    {"corrected_angle": k["correctedAngle"].astype(float)[order],
+                     "log_time": t[order]})
+    return angles, _summary(a, station, repeat, finite)
+
+
+def _rotor_period(t: Array, burst: NDArray[np.int64]) -> float:
+    """A station's LH2 rotor period (s): the median spacing of its logged measurements
+    within the channels' range (the slowest channel's period when none is)."""
+    starts = t[np.r_[True, np.diff(burst) > 0]] if len(t) else t
+    gap = np.diff(starts)
+    near = gap[(gap > LH2_PERIOD_RANGE_S[0] * 0.98) & (gap < LH2_PERIOD_RANGE_S[1] * 1.02)]
+    return float(np.median(near)) if len(near) else LH2_PERIOD_RANGE_S[1]

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.model.board import Board, make_board
-from lhgraph.model.lh1 import FactoryCalibration
+from lhgraph.model.station import FactoryCalibration
 
 Array = NDArray[np.float64]
 

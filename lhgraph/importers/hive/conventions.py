@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from lhgraph.importers.hive.bag import HiveBag
 from lhgraph.io.angles import Angles
 from lhgraph.model.calibration import StationCalibration
-from lhgraph.model.lh1 import FactoryCalibration
+from lhgraph.model.station import FactoryCalibration
 
 Array = NDArray[np.float64]
 

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from lhgraph.estimation.init.pnp_nonplanar import single_station_pnp
 from lhgraph.importers.hive.bag import HiveBag
 from lhgraph.importers.hive.conventions import CANDIDATE_MAPPINGS, AxisMapping
-from lhgraph.model.lh1 import StationModel
+from lhgraph.model.station import StationModel
 
 Array = NDArray[np.float64]
 
