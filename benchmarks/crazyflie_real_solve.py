@@ -1,8 +1,8 @@
-"""Our calibration of the shared Crazyflie LH1 log against cfclient's, on issue #14's measure
-(b), with the two hit-time models of the log.
+"""Our calibration of a shared Crazyflie log against cfclient's, on issue #14's measures (b)
+and (a) (LH1 log) and issue #15's (LH2 log, ``--log lh2``).
 
-    python3 benchmarks/crazyflie_real_solve.py [--import-dir DIR] [--work DIR]
-        [--output docs/results/crazyflie_real_solve.md]
+    python3 benchmarks/crazyflie_real_solve.py [--log lh1|lh2] [--import-dir DIR]
+        [--work DIR] [--output docs/results/crazyflie_real_solve[_lh2].md]
 
 1. ``lhgraph import crazyflie`` of the shared log (or ``--import-dir``, its output).
 2. ``lhgraph solve`` (graph, the deck, the log's ``ootx.toml``) three times:
@@ -15,6 +15,8 @@
      times, not a file the contract allows as such (its ``time`` is not the hit time);
    - *hit times, IMU*: the hit times with the deck's ``imu.csv`` (``--imu``: the light-only
      solution refined with IMU factors).
+   The LH2 log has no *log stamps* row: its hits are not put on an LH1 rotor grid (both
+   planes of a turn share a state, docs/crazyflie.md).
 3. ``lhgraph track`` of the log through cfclient's geometry and through ours (hit times),
    each without and with the deck's IMU (``--imu imu.csv``), and through ours calibrated
    with the IMU, with it; two at a time in parallel processes (wall time of each).
@@ -39,7 +41,8 @@ from lhgraph.io.angles import Angles, load_angles, save_angles
 from lhgraph.io.stations import load_stations
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")
+LOGS = {"lh1": Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move/log02"),
+        "lh2": Path("/work/shared/data/bitcraze-positioning/lh2_crossingBeam_move/log00")}
 
 
 def lhgraph(*args: str) -> tuple[str, float]:
@@ -86,11 +89,16 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--import-dir", type=Path, help="output of lhgraph import crazyflie")
     ap.add_argument("--work", type=Path, help="where the solutions go (default: a temp dir)")
+    ap.add_argument("--log", choices=sorted(LOGS), default="lh1",
+                    help="which shared log (default lh1)")
     ap.add_argument("--output", type=Path,
-                    default=ROOT / "docs/results/crazyflie_real_solve.md")
+                    help="default docs/results/crazyflie_real_solve.md (lh2: _lh2.md)")
     args = ap.parse_args()
-    if args.import_dir is None and not DATA.is_dir():
-        print(f"{DATA}: not there, nothing measured")
+    log = LOGS[args.log]
+    suffix = "" if args.log == "lh1" else f"_{args.log}"
+    args.output = args.output or ROOT / f"docs/results/crazyflie_real_solve{suffix}.md"
+    if args.import_dir is None and not log.is_file():
+        print(f"{log}: not there, nothing measured")
         return 0
     tmp = tempfile.TemporaryDirectory()
     work = args.work or Path(tmp.name)
@@ -98,16 +106,16 @@ def main() -> int:
     imp = args.import_dir
     if imp is None:
         imp = work / "import"
-        lhgraph("import", "crazyflie", str(DATA / "log02"), "--system-config",
-                str(DATA / "system-config.yaml"), "--mocap", str(DATA / "mocap02.npy"),
-                "--output", str(imp), "--force")
+        lhgraph("import", "crazyflie", str(log), "--system-config",
+                str(log.with_name("system-config.yaml")), "--output", str(imp), "--force")
     save_angles(with_log_stamps(load_angles(imp / "angles.csv")), work / "angles-stamps.csv",
                 overwrite=True)
     rows, geometries = [], [f"cfclient={imp / 'stations-cfclient.toml'}"]
     imu = ["--imu", str(imp / "imu.csv")]
-    for name, angles, extra in (("hit times", imp / "angles.csv", []),
-                                ("log stamps", work / "angles-stamps.csv", []),
-                                ("hit times, IMU", imp / "angles.csv", imu)):
+    solves = [("hit times", imp / "angles.csv", []),
+              ("log stamps", work / "angles-stamps.csv", []),
+              ("hit times, IMU", imp / "angles.csv", imu)]
+    for name, angles, extra in solves[::2] if args.log == "lh2" else solves:
         out = work / f"stations-{name.replace(' ', '-').replace(',', '')}.toml"
         text, seconds = lhgraph("solve", "--board", str(imp / "board.toml"), "--angles",
                                 str(angles), "--calibration", str(imp / "ootx.toml"),
@@ -127,7 +135,8 @@ def main() -> int:
     track_s = run_tracks(tracks, imp, work)
     evaluation = work / "evaluation.md"
     subprocess.run([sys.executable, str(ROOT / "benchmarks/crazyflie_evaluation.py"),
-                    "--import-dir", str(imp), "--output", str(evaluation), "--stations",
+                    "--log", args.log, "--import-dir", str(imp), "--output", str(evaluation),
+                    "--stations",
                     *geometries, "--track",
                     *(f"{name}={work / f'track-{i}.csv'}" for i, name in enumerate(tracks))],
                    check=True, capture_output=True)
@@ -151,8 +160,9 @@ def main() -> int:
                    "ours (hit times, IMU) + IMU", "cfclient + IMU"))]
     track_rows = [f"- `lhgraph track` through {name}'s geometry: {s:.0f} s (two tracks in "
                   "parallel on the machine's cores)" for name, s in track_s.items()]
-    lines = ["# The shared Crazyflie LH1 log calibrated by lhgraph", "",
-             "`python3 benchmarks/crazyflie_real_solve.py` (docs/crazyflie.md).", "",
+    lines = [f"# The shared Crazyflie {args.log.upper()} log calibrated by lhgraph", "",
+             f"`python3 benchmarks/crazyflie_real_solve.py --log {args.log}` "
+             "(docs/crazyflie.md).", "",
              "## Solves", "",
              "| times | LM iterations | residuals | station distance (m) | solve s |",
              "|---|---|---|---|---|", *rows, "",

@@ -1,5 +1,6 @@
-"""``lhgraph export cfclient``: cfclient's system-config.yaml, read back by cflib, in a
-gravity world chosen from the receiver's IMU or the stations' OOTX accelerometers."""
+"""``lhgraph export cfclient``: cfclient's system-config.yaml (LH1 and LH2 systems), read
+back by cflib, in a gravity world chosen from the receiver's IMU or the stations' OOTX
+accelerometers."""
 
 from __future__ import annotations
 
@@ -23,9 +24,9 @@ from lhgraph.io.cfclient import SystemConfig, read_system_config, write_system_c
 from lhgraph.io.files import write_csv_columns
 from lhgraph.io.stations import Station, Stations, save_stations
 from lhgraph.io.trajectory import Trajectory, save_trajectory
-from lhgraph.model.bitcraze import calibration_from_bitcraze
+from lhgraph.model.bitcraze import BITCRAZE_KEYS, calibration_from_bitcraze
 from lhgraph.model.calibration import StationCalibration, save_calibration
-from lhgraph.model.station import FactoryCalibration
+from lhgraph.model.station import FactoryCalibration, StationModel
 from lhgraph.workflow.export import export_cfclient
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "bitcraze-positioning"
@@ -58,13 +59,34 @@ def _calibrations(up: bool = False) -> dict[int, StationCalibration]:
     return out
 
 
-def _write_setup(tmp_path: Path, up: bool = False, **extra: object) -> tuple[Path, Path]:
-    """Stations in the tilted world w (reference 0) and their ootx.toml."""
+def _lh2_calibrations() -> dict[int, StationCalibration]:
+    """LH2 factory calibrations like the shared log's (all seven terms per light plane, in
+    Bitcraze's convention, which is ours), channels 1 and 2."""
+    out = {}
+    for k in _true_stations():
+        s = 1.0 + 0.3 * k
+        cal = FactoryCalibration(phase=[0.0, 0.0032 * s], tilt=[-0.052, 0.0497 * s],
+                                 curve=[-0.364 * s, 0.416], gibphase=[2.68 - k, 1.02 + k],
+                                 gibmag=[-0.00073 * s, 0.0047], ogeephase=[1.22, 2.01 * s],
+                                 ogeemag=[-0.292, -0.282 * s])
+        out[k] = StationCalibration(cal, 3_400_000_000 + k, generation=2, channel=k + 1)
+    return out
+
+
+def _write_setup(tmp_path: Path, up: bool = False, generation: int | None = None,
+                 calibrations: dict[int, StationCalibration] | None = None,
+                 **extra: object) -> tuple[Path, Path]:
+    """Stations in the tilted world w (reference 0) and their ootx.toml (default: LH1);
+    ``generation`` (one for all, or None: no ``generation`` key) goes into the stations'
+    models."""
     T_w_true = make_pose(TILT, [0.3, -0.2, 0.1])
-    stations = Stations(0, {k: Station(T_w_true @ T) for k, T in _true_stations().items()},
-                        dict(extra))
+    model = StationModel() if generation is None else StationModel(generation=generation)
+    stations = Stations(0, {k: Station(T_w_true @ T, None, model)
+                            for k, T in _true_stations().items()}, dict(extra))
+    tmp_path.mkdir(parents=True, exist_ok=True)
     return (save_stations(stations, tmp_path / "stations.toml"),
-            save_calibration(_calibrations(up), tmp_path / "ootx.toml"))
+            save_calibration(_calibrations(up) if calibrations is None else calibrations,
+                             tmp_path / "ootx.toml"))
 
 
 def _hand_held(tmp_path: Path, rest_s: float = 2.0, noise: float = 0.02,
@@ -156,6 +178,137 @@ def test_round_trip_of_the_shared_file(tmp_path):
                 assert b["calibs"][k]["sweeps"][s][key] == pytest.approx(value, abs=1e-12)
 
 
+WORLD_AS_IS = WorldOptions(up="none", origin="world", x="world")
+
+
+def test_lh2_file_reads_back_with_cflib(tmp_path):
+    cfm = pytest.importorskip("cflib.localization").LighthouseConfigFileManager
+    stations, ootx = _write_setup(tmp_path, generation=2, calibrations=_lh2_calibrations())
+    out = tmp_path / "system-config.yaml"
+    result = export_cfclient(stations, out, calibration=ootx, options=WORLD_AS_IS)
+    assert result.config.system_type == 2 and "systemType 2 (LH2)" in result.summary()
+    geos, calibs, system_type = cfm.read(str(out))
+    assert system_type == 2 and sorted(geos) == [0, 1] and sorted(calibs) == [0, 1]
+    for k, T in result.config.T_world_lh.items():
+        np.testing.assert_allclose(geos[k].origin, T[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(geos[k].rotation_matrix, T[:3, :3], atol=1e-12)
+        ours = _lh2_calibrations()[k].calibration
+        for plane, sweep in enumerate(calibs[k].sweeps):  # Bitcraze's LH2 terms are ours
+            theirs = sweep.as_file_object()
+            assert sorted(theirs) == sorted(BITCRAZE_KEYS)
+            for key in BITCRAZE_KEYS:
+                assert theirs[key] == pytest.approx(getattr(ours, key)[plane], abs=1e-12), key
+        assert calibs[k].uid == 3_400_000_000 + k
+    mine = yaml.safe_load(out.read_text())
+    cfm.write(str(tmp_path / "cflib.yaml"), geos, calibs, system_type)
+    assert yaml.safe_load((tmp_path / "cflib.yaml").read_text()) == mine
+
+
+def test_lh2_round_trip_through_our_reader(tmp_path):
+    """Stations TOML + ootx.toml (LH2) -> export (CLI) -> read_system_config: the poses and
+    all seven terms of each plane come back, as generation-2 calibrations."""
+    stations, ootx = _write_setup(tmp_path, generation=2, calibrations=_lh2_calibrations())
+    out = tmp_path / "system-config.yaml"
+    assert main(["export", "cfclient", str(stations), "--calibration", str(ootx), "--output",
+                 str(out), "--up", "none", "--origin", "world", "--x", "world",
+                 "--quiet"]) == 0
+    back = read_system_config(out)
+    T_w_true = make_pose(TILT, [0.3, -0.2, 0.1])
+    assert back.system_type == 2 and sorted(back.T_world_lh) == [0, 1]
+    for k, T in _true_stations().items():
+        np.testing.assert_allclose(back.T_world_lh[k], T_w_true @ T, atol=1e-12)
+        cal = back.calibrations[k]
+        assert cal.generation == 2 and cal.id == 3_400_000_000 + k
+        for key in BITCRAZE_KEYS:
+            np.testing.assert_allclose(getattr(cal.calibration, key),
+                                       getattr(_lh2_calibrations()[k].calibration, key),
+                                       atol=1e-12, err_msg=key)
+        assert np.any(cal.calibration.ogeemag) and np.any(cal.calibration.ogeephase)
+
+
+@pytest.mark.parametrize("generation, calibration, extra, expected", [
+    (2, False, {}, 2),             # the stations' models alone
+    (None, True, {}, 2),           # the calibration's generation (stations file: no key)
+    (None, False, {"system_type": 2}, 2),  # the old key on a file without generation keys
+    (None, False, {"system_type": 1}, 1),
+    (2, True, {"system_type": 2}, 2),
+])
+def test_system_type_from_the_generation(tmp_path, generation, calibration, extra, expected):
+    stations, ootx = _write_setup(tmp_path, generation=generation,
+                                  calibrations=_lh2_calibrations(), **extra)
+    result = export_cfclient(stations, tmp_path / "a.yaml",
+                             calibration=ootx if calibration else None, options=WORLD_AS_IS)
+    assert result.config.system_type == expected
+    assert read_system_config(tmp_path / "a.yaml").system_type == expected
+    assert len(result.config.calibrations) == (2 if calibration else 0)
+
+
+def test_mixed_or_contradicting_generations_are_refused(tmp_path, capsys):
+    lh1_stations, lh1_ootx = _write_setup(tmp_path / "lh1")
+    lh2_stations, lh2_ootx = _write_setup(tmp_path / "lh2", generation=2,
+                                          calibrations=_lh2_calibrations())
+    mixed_cal = {0: _lh2_calibrations()[0], 1: _calibrations()[1]}
+    _, mixed_ootx = _write_setup(tmp_path / "mixed_cal", calibrations=mixed_cal)
+    mixed = tmp_path / "mixed.toml"  # station 0 LH2, station 1 LH1 (no generation key)
+    mixed.write_text(lh1_stations.read_text().replace("[lighthouses.0]\n",
+                                                      "[lighthouses.0]\ngeneration = 2\n"))
+    lh2_old_key, _ = _write_setup(tmp_path / "key1", generation=2, system_type=1)
+    lh1_old_key, _ = _write_setup(tmp_path / "key2", system_type=2)
+    bad_key, _ = _write_setup(tmp_path / "key3", system_type=3)
+    list_key, _ = _write_setup(tmp_path / "key4", system_type=[2])
+    out = tmp_path / "out" / "system-config.yaml"
+
+    def export(stations: Path, *more: str) -> list[str]:
+        return ["export", "cfclient", str(stations), "--output", str(out), *more]
+    cases = [
+        (export(mixed), "mixed generations in the stations file (LH1: station(s) 1; LH2: "
+         "station(s) 0)"),
+        (export(lh1_stations, "--calibration", str(mixed_ootx)),
+         "mixed generations in the calibration file"),
+        (export(lh2_stations, "--calibration", str(lh1_ootx)),
+         "the stations file says LH2 (generation = 2) but the calibration"),
+        (export(lh2_old_key), "system_type = 1 (LH1) contradicts"),
+        (export(lh1_old_key, "--calibration", str(lh1_ootx)),
+         "system_type = 2 (LH2) contradicts the calibration's generation"),
+        (export(bad_key), "system_type must be 1 (LH1) or 2 (LH2), got 3"),
+        (export(list_key), "system_type must be 1 (LH1) or 2 (LH2), got [2]"),
+    ]
+    for args, match in cases:
+        _one_line_refusal(capsys, args, match)
+        assert not out.exists() and not out.parent.exists()
+    assert main(export(lh2_stations, "--calibration", str(lh2_ootx), "--quiet")) == 0
+    assert read_system_config(out).system_type == 2
+
+
+def test_lh2_shared_log_import_then_export_reproduces_its_file(tmp_path):
+    """``lhgraph import crazyflie`` of the shared LH2 log with its system-config.yaml, then
+    the export of its stations-cfclient.toml with its ootx.toml: cfclient's file again
+    (geometry to float32 precision, the calibration terms exactly)."""
+    data = SHARED / "lh2_crossingBeam_move"
+    if not (data / "log00").exists() or not (data / "system-config.yaml").exists():
+        pytest.skip("shared Bitcraze LH2 log not available")
+    imported = tmp_path / "import"
+    assert main(["import", "crazyflie", str(data / "log00"), "--system-config",
+                 str(data / "system-config.yaml"), "--output", str(imported), "--quiet"]) == 0
+    out = tmp_path / "system-config.yaml"
+    assert main(["export", "cfclient", str(imported / "stations-cfclient.toml"),
+                 "--calibration", str(imported / "ootx.toml"), "--output", str(out),
+                 "--up", "none", "--origin", "world", "--x", "world", "--quiet"]) == 0
+    a, b = yaml.safe_load((data / "system-config.yaml").read_text()), yaml.safe_load(
+        out.read_text())
+    assert a.keys() == b.keys() and a["systemType"] == b["systemType"] == 2
+    assert a["geos"].keys() == b["geos"].keys() and a["calibs"].keys() == b["calibs"].keys()
+    for k in a["geos"]:
+        for key in ("origin", "rotation"):  # float32 rotations are made orthonormal
+            np.testing.assert_allclose(b["geos"][k][key], a["geos"][k][key], atol=1e-6)
+    for k in a["calibs"]:
+        assert b["calibs"][k]["uid"] == a["calibs"][k]["uid"]
+        for s in (0, 1):
+            assert b["calibs"][k]["sweeps"][s].keys() == a["calibs"][k]["sweeps"][s].keys()
+            for key, value in a["calibs"][k]["sweeps"][s].items():
+                assert b["calibs"][k]["sweeps"][s][key] == pytest.approx(value, abs=1e-12)
+
+
 def test_still_mask_finds_the_rest():
     t = np.arange(0.0, 10.0, 0.01)
     a = np.tile([0.0, 0.0, STANDARD_GRAVITY_MPS2], (len(t), 1))
@@ -229,7 +382,6 @@ def _one_line_refusal(capsys, args: list[str], match: str) -> None:
 def test_bad_inputs_exit_2_one_line_nothing_written(tmp_path, capsys):
     stations, ootx = _write_setup(tmp_path)
     imu, trajectory, _ = _hand_held(tmp_path)
-    lh2, _ = _write_setup(tmp_path / "lh2", system_type=2)
     stream = np.loadtxt(imu, delimiter=",", skiprows=1)
     g_units = write_csv_columns(tmp_path / "imu_g.csv", {
         "time": stream[:, 0], **{f"a{c}": stream[:, 1 + i] / STANDARD_GRAVITY_MPS2
@@ -250,7 +402,6 @@ def test_bad_inputs_exit_2_one_line_nothing_written(tmp_path, capsys):
         (base + ["--origin", "receiver-start"], "needs the receiver's trajectory"),
         (base + ["--trajectory", str(trajectory), "--at", "99"], "outside the trajectory"),
         (base + ["--imu", str(g_units), "--trajectory", str(trajectory)], "m/s^2"),
-        (["export", "cfclient", str(lh2), "--output", str(out)], "LH2"),
         (base + ["--calibration", str(imu)], "not valid TOML"),
     ]
     for args, match in cases:

@@ -83,10 +83,11 @@ def add_export(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     export = sub.add_parser("export", help="write the stations for other software")
     targets = export.add_subparsers(dest="target", required=True, metavar="TARGET")
     p = targets.add_parser("cfclient", help="Bitcraze cfclient's system-config.yaml",
-                           description="Write the stations and their factory calibration "
-                           "as cfclient's system configuration, z up from gravity, origin and "
-                           "x chosen by name (docs/export.md).")
-    p.add_argument("stations", help="stations TOML (LH1)")
+                           description="Write the stations (LH1 or LH2) and their factory "
+                           "calibration as cfclient's system configuration, z up from gravity, "
+                           "origin and x chosen by name (docs/export.md).")
+    p.add_argument("stations", help="stations TOML (LH1 or LH2: systemType from the "
+                   "stations' generation)")
     p.add_argument("--output", "-o", required=True, help="system-config.yaml to write")
     p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
     p.add_argument("--imu", help="the receiver's imu.csv (board frame, SI units)")

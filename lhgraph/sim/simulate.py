@@ -25,6 +25,7 @@ from lhgraph.io.stations import Station, Stations, save_stations
 from lhgraph.io.trajectory import Trajectory, save_trajectory
 from lhgraph.model.board import Board, save_board
 from lhgraph.model.boards import board_by_name
+from lhgraph.model.calibration import StationCalibration, save_calibration
 from lhgraph.model.station import StationModel, ideal_angles, sweep_angle
 from lhgraph.signal.pulses import LightPulses
 from lhgraph.sim.config import (
@@ -362,7 +363,9 @@ def write_simulation(capture: SimulatedCapture, out_dir: str | Path,
                      overwrite: bool = False, raw_capture: bool = False) -> dict[str, Path]:
     """Write ``angles.csv``, ``board.toml``, ``truth.toml``, ``trajectory.csv`` to ``out_dir``
     (with ``raw_capture`` also the raw signal a board would record, ``capture.lhcap``; with
-    a simulated IMU its ``imu.csv``).
+    a simulated IMU its ``imu.csv``; for LH2 stations ``ootx.toml``, what an LH2 receiver
+    decodes from them: generation, channel and factory calibration, which the solver needs
+    to read the angles as light planes).
 
     Checks every target first, so either all files are written or none (InputError when one
     exists and ``overwrite`` is false).
@@ -376,6 +379,8 @@ def write_simulation(capture: SimulatedCapture, out_dir: str | Path,
     paths = {key: out_dir / name for key, name in OUTPUT_FILES.items()}
     if capture.imu is not None:
         paths["imu"] = out_dir / "imu.csv"
+    if capture.config.generation == 2:
+        paths["ootx"] = out_dir / "ootx.toml"
     for path in [*paths.values(), *([out_dir / CAPTURE_FILE] if raw_capture else [])]:
         check_writable(path, overwrite)
     save_angles(capture.angles, paths["angles"], overwrite)
@@ -384,6 +389,10 @@ def write_simulation(capture: SimulatedCapture, out_dir: str | Path,
     save_trajectory(capture.trajectory, paths["trajectory"], overwrite)
     if capture.imu is not None:
         save_imu(capture.imu.stream, paths["imu"], overwrite)
+    if "ootx" in paths:
+        save_calibration({k: StationCalibration(s.model.calibration, 0x2000 + k,
+                                                generation=2, channel=s.model.channel)
+                          for k, s in capture.truth.stations.items()}, paths["ootx"], overwrite)
     if raw_capture:
         paths["capture"] = write_simulated_capture(capture, out_dir, overwrite)
     return paths

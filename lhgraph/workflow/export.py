@@ -3,8 +3,10 @@
 :func:`export_cfclient` reads the stations (and optionally their factory calibration, the
 receiver's IMU stream and trajectory), re-expresses the stations in the world a Crazyflie
 user expects (:mod:`lhgraph.estimation.world_alignment`: z up from gravity, origin and x by
-name), maps our calibration terms to Bitcraze's (:mod:`lhgraph.model.bitcraze`) and writes
-the file (:mod:`lhgraph.io.cfclient`). Every input is checked before anything is written.
+name), maps our calibration terms to Bitcraze's (:mod:`lhgraph.model.bitcraze`, through
+:data:`lhgraph.io.cfclient.CALIBRATION_MAPPINGS`) and writes the file
+(:mod:`lhgraph.io.cfclient`). The file's ``systemType`` is the stations' generation (LH1 or
+LH2, :func:`system_type`). Every input is checked before anything is written.
 docs/export.md describes the options.
 """
 
@@ -27,15 +29,12 @@ from lhgraph.estimation.world_alignment import (
     up_from_imu,
     up_from_ootx,
 )
-from lhgraph.io.cfclient import SystemConfig, write_system_config
-from lhgraph.io.files import check_writable
+from lhgraph.io.cfclient import SYSTEM_TYPES, SystemConfig, write_system_config
+from lhgraph.io.files import check_writable, read_toml, station_tables
 from lhgraph.io.imu import ImuStream, load_imu
 from lhgraph.io.stations import Stations, load_stations
 from lhgraph.io.trajectory import Trajectory, load_trajectory
 from lhgraph.model.calibration import StationCalibration, load_calibration
-
-LH2_REFUSAL = ("LH2 stations cannot be exported yet (they come with issue #15): this "
-               "export writes LH1 systems (systemType 1)")
 
 
 @dataclass(frozen=True)
@@ -53,7 +52,8 @@ class ExportResult:
         """Two lines for the terminal (the warnings are separate)."""
         n_cal = len(self.config.calibrations)
         return (f"wrote {self.path}: {len(self.config.T_world_lh)} station(s), {n_cal} with "
-                f"factory calibration, systemType {self.config.system_type}\n"
+                f"factory calibration, systemType {self.config.system_type} "
+                f"({SYSTEM_TYPES[self.config.system_type]})\n"
                 f"{self.alignment.summary()}")
 
 
@@ -64,6 +64,64 @@ def _calibrations_of(stations: Stations, calibrations: dict[int, StationCalibrat
     warnings = [f"station {k} has no factory calibration in the calibration file: the "
                 "Crazyflie will use what it receives from the station" for k in missing]
     return {k: calibrations[k] for k in stations.indices() if k in calibrations}, warnings
+
+
+def _generation_of(generations: dict[int, int], path: str | Path, what: str) -> int:
+    """The one generation of ``generations`` (station index -> 1 or 2); InputError naming
+    the stations of each when they are mixed (one cfclient system is LH1 or LH2)."""
+    kinds = sorted(set(generations.values()))
+    if len(kinds) > 1:
+        parts = "; ".join(
+            f"{SYSTEM_TYPES[g]}: station(s) "
+            + ", ".join(str(k) for k in sorted(generations) if generations[k] == g)
+            for g in kinds)
+        raise InputError(f"mixed generations in the {what} ({parts}): a cfclient system is "
+                         "either LH1 or LH2, export each generation from its own file", path)
+    return kinds[0]
+
+
+def system_type(stations: Stations, stations_path: str | Path,
+                calibrations: dict[int, StationCalibration] | None = None,
+                calibration_path: str | Path | None = None) -> int:
+    """The exported ``systemType`` (1 = LH1, 2 = LH2): the stations' generation.
+
+    From the calibration file's ``generation`` when one is given (every station of it), else
+    from the stations file's models (``generation``, LH1 when absent). InputError (one line)
+    when either file mixes generations, when the stations file states a generation
+    (``generation`` keys) that the calibration contradicts, or when the stations file's old
+    top-level ``system_type`` key is not 1 or 2 or contradicts the generation. A stations
+    file without ``generation`` keys and without a calibration keeps declaring its system with
+    ``system_type`` (``system_type = 2``: LH2).
+    """
+    in_file = _generation_of({k: stations.stations[k].model.generation
+                              for k in stations.indices()}, stations_path, "stations file")
+    stated = any("generation" in table for _, table, _ in
+                 station_tables(read_toml(stations_path), stations_path))
+    generation, source = in_file, f"the stations' generation in {stations_path}"
+    if calibrations:
+        generation = _generation_of({k: c.generation for k, c in calibrations.items()},
+                                    calibration_path, "calibration file")
+        source = f"the calibration's generation in {calibration_path}"
+        if stated and in_file != generation:
+            raise InputError(
+                f"the stations file says {SYSTEM_TYPES[in_file]} (generation = {in_file}) but "
+                f"the calibration {calibration_path} says {SYSTEM_TYPES[generation]} "
+                f"(generation = {generation})", stations_path)
+    declared = stations.extra.get("system_type")
+    if declared is None:
+        return generation
+    if isinstance(declared, bool) or not isinstance(declared, int) or (
+            declared not in SYSTEM_TYPES):
+        raise InputError(f"system_type must be 1 (LH1) or 2 (LH2), got {declared!r}",
+                         stations_path, "system_type")
+    if declared != generation:
+        if not stated and not calibrations:
+            return int(declared)  # the file's only statement of its system
+        raise InputError(
+            f"system_type = {declared} ({SYSTEM_TYPES[declared]}) contradicts {source} "
+            f"({SYSTEM_TYPES[generation]}): remove system_type or correct the generation",
+            stations_path, "system_type")
+    return generation
 
 
 def _up(options: WorldOptions, stations: Stations,
@@ -92,12 +150,15 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
                     trajectory: str | Path | None = None,
                     options: WorldOptions | None = None,
                     overwrite: bool = False) -> ExportResult:
-    """Write ``stations_path`` (a stations TOML, LH1) as cfclient's ``system-config.yaml``.
+    """Write ``stations_path`` (a stations TOML, LH1 or LH2: :func:`system_type`) as
+    cfclient's ``system-config.yaml``.
 
     ``calibration``: an ``ootx.toml`` whose terms become the file's ``calibs`` (and whose
     accelerometer vectors can give up); ``imu`` (``imu.csv``, board frame) and ``trajectory``
     (``T_world_board`` in the stations' world, e.g. from ``lhgraph solve --trajectory`` or
     ``lhgraph track``): the receiver's data for ``up = imu`` and the receiver-start choices.
+    The calibration's terms are written through the mapping of the system type
+    (:data:`lhgraph.io.cfclient.CALIBRATION_MAPPINGS`; LH2: Bitcraze's terms are ours).
     """
     options = options or WorldOptions()
     output = check_writable(output, overwrite, create_parents=False)
@@ -105,13 +166,8 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
         raise InputError("--imu needs --trajectory: the receiver's poses carry its "
                          "accelerometer into the stations' world")
     stations = load_stations(stations_path)
-    system = stations.extra.get("system_type", 1)
-    if system == 2:
-        raise InputError(LH2_REFUSAL, stations_path, "system_type")
-    if system != 1:
-        raise InputError(f"system_type must be 1 (LH1), got {system!r}", stations_path,
-                         "system_type")
     calibrations = None if calibration is None else load_calibration(calibration)
+    system = system_type(stations, stations_path, calibrations, calibration)
     stream = None if imu is None else load_imu(imu)
     path_poses = None if trajectory is None else load_trajectory(trajectory)
     if stream is not None and np.median(np.linalg.norm(stream.accel_mps2, axis=1)) < 0.5 * (
@@ -123,7 +179,7 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
     moved = transform_stations(stations, alignment.T_new_w)
     calibs, warnings = ({}, []) if calibrations is None else _calibrations_of(
         stations, calibrations)
-    config = SystemConfig(1, {k: moved.pose(k) for k in moved.indices()}, calibs)
+    config = SystemConfig(system, {k: moved.pose(k) for k in moved.indices()}, calibs)
     path = write_system_config(config, output, overwrite)
     moved = dataclasses.replace(moved, extra={**moved.extra, "world": "cfclient"})
     return ExportResult(path, config, moved, alignment,

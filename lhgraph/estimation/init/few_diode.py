@@ -108,7 +108,9 @@ class FewDiodeInitialiser:
     and ``velocity_span_s`` as in the default initialiser; the paths' rms is floored at
     ``rms_floor_rad`` for the Kabsch weights (4 points leave only 2 redundant equations, so a
     fit's own rms says little); ``twist_per_path``: the initial twists from each station's
-    own path (:func:`~lhgraph.estimation.init.pnp_kabsch.world_states`)."""
+    own path (:func:`~lhgraph.estimation.init.pnp_kabsch.world_states`; None: when a station
+    is LH2, whose stations see the board at once: on the real LH1 log, where they take
+    turns, the merged path's twists converge in fewer iterations, 33 against 52)."""
 
     max_gap_s: float = 0.05
     velocity_span_s: float = 0.01
@@ -116,7 +118,7 @@ class FewDiodeInitialiser:
     cross_sigma_rad: float = 0.15
     cross_max_gap_s: float = 0.05
     rms_floor_rad: float = 1e-4
-    twist_per_path: bool = True
+    twist_per_path: bool | None = None
 
     def __call__(self, board: Board, angles: Angles, problem: GraphProblem) -> Initialisation:
         twins = self._twins(board, angles, problem)
@@ -154,8 +156,11 @@ class FewDiodeInitialiser:
             raise SolverError("no station saw 4 diodes of the board on both axes within a "
                               "sweep or two: no planar pose to start from")
         paths = triangulated(paths, T_world_lh, self.max_gap_s)
+        per_path = self.twist_per_path
+        if per_path is None:
+            per_path = any(m.generation == 2 for m in problem.models)
         X0, V0 = world_states(paths, T_world_lh, problem.state_time, self.velocity_span_s,
-                              self.twist_per_path)
+                              per_path)
         return Initialisation(T_world_lh, X0, V0, overlap)
 
     def _floored(self, paths: list[tuple[Array, Array, Array]]

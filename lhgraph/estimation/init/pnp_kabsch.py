@@ -31,12 +31,15 @@ normals, model) -> PnPResult`` (the signature of :func:`board_poses`)."""
 @dataclass(frozen=True)
 class Initialisation:
     """Initial values: station poses ``L`` (S, 4, 4) (slot 0 = identity), board poses ``X``
-    (K, 4, 4) and twists ``V`` (K, 6); ``overlap`` = time-matched pose pairs per station."""
+    (K, 4, 4) and twists ``V`` (K, 6); ``overlap`` = time-matched pose pairs per station
+    with the station it was joined to, ``parents`` that station's slot (slot 0: itself;
+    :func:`join_paths`; empty when not known)."""
 
     L: Array
     X: Array
     V: Array
     overlap: list[int] = field(default_factory=list)
+    parents: list[int] = field(default_factory=list)
 
 
 def _station_path(board: Board, angles: Angles, problem: GraphProblem, pose_solver: PoseSolver,
@@ -91,46 +94,122 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
                max_gap_s: float = 0.05, velocity_span_s: float = 0.01,
                pose_solver: PoseSolver | None = None) -> Initialisation:
     """Initial values from per-station PnP paths (:func:`station_paths`: the Viterbi's chain
-    of planar twins, or ``pose_solver`` per measurement) and a weighted Kabsch on sensor
-    points; twists from the merged path's change over ``velocity_span_s``."""
+    of planar twins, or ``pose_solver`` per measurement) joined by weighted Kabsch on sensor
+    points over the stations' overlap tree (:func:`join_paths`); twists from the merged
+    path's change over ``velocity_span_s``."""
     paths = station_paths(board, angles, problem, pose_solver)
-    L0, overlap = join_paths(board, problem, paths, max_gap_s)
+    parents: list[int] = []
+    L0, overlap = join_paths(board, problem, paths, max_gap_s, parents)
     X0, V0 = world_states(paths, L0, problem.state_time, velocity_span_s)
-    return Initialisation(L0, X0, V0, overlap)
+    return Initialisation(L0, X0, V0, overlap, parents)
+
+
+MIN_MATCHES = 3
+"""Time-matched pose pairs two stations' paths need for their relative pose (Kabsch)."""
+
+
+def pair_matches(paths: list[tuple[Array, Array, Array]], max_gap_s: float = 0.05
+                 ) -> NDArray[np.int64]:
+    """``M[p, c]``: how many of slot c's path times have samples of slot p's path within
+    ``max_gap_s`` on both sides (the pairs :func:`relative_pose` would use), (S, S)."""
+    S = len(paths)
+    M = np.zeros((S, S), dtype=np.int64)
+    for p in range(S):
+        for c in range(S):
+            if p != c:
+                M[p, c] = int(_match_times(paths[c][0], paths[p][0], max_gap_s).sum())
+    return M
+
+
+def overlap_tree(matches: NDArray[np.int64], min_matches: int = MIN_MATCHES) -> list[int]:
+    """Parent slot of every slot (slot 0, the reference, is its own): every station joined
+    straight to the reference when each has ``min_matches`` with it (the star), otherwise a
+    maximum spanning tree over the stations' time-matched pairs grown from the reference
+    (Prim's: each step joins the unplaced station with the most matches with a placed one,
+    so each station's chain to the reference is the one whose weakest link is strongest);
+    -1 for a station no placed station shares ``min_matches`` with."""
+    S = len(matches)
+    if all(matches[0, c] >= min_matches for c in range(1, S)):
+        return [0] * S
+    parent = [-1] * S
+    parent[0] = 0
+    placed = [0]
+    while len(placed) < S:
+        free = [c for c in range(S) if parent[c] < 0]
+        w = matches[np.ix_(placed, free)]
+        i, j = np.unravel_index(np.argmax(w), w.shape)
+        if w[i, j] < min_matches:
+            break
+        parent[free[j]] = placed[i]
+        placed.append(free[j])
+    return parent
+
+
+def relative_pose(board: Board, parent: tuple[Array, Array, Array],
+                  child: tuple[Array, Array, Array], max_gap_s: float = 0.05) -> Array:
+    """``T_parent_child`` from two stations' paths ``(times, T_lh_board, rms_rad)``: a weighted
+    Kabsch (weights 1/rms^2 of the child's fits) between the child path's sensor points and
+    the parent path's interpolated to the same times, over the time-matched pairs whose
+    proposal agrees with the median (at least :data:`MIN_MATCHES` pairs expected)."""
+    t_p, T_p, _ = parent
+    t_s, T_s, rms_s = child
+    ok = _match_times(t_s, t_p, max_gap_s)
+    T_p_at = interpolate_poses(t_p, T_p, t_s[ok])
+    # each matched pair proposes T_parent_child; keep those near the median proposal
+    proposals = T_p_at @ inverse(T_s[ok])
+    centre = np.median(proposals[:, :3, 3], axis=0)
+    agree = np.linalg.norm(proposals[:, :3, 3] - centre, axis=1)
+    agree = agree <= max(3 * np.median(agree), 0.02)
+    src = transform_points(T_s[ok][agree][:, None], board.positions[None])  # child
+    dst = transform_points(T_p_at[agree][:, None], board.positions[None])  # parent
+    w = np.repeat(1.0 / (rms_s[ok][agree] ** 2 + 1e-10), len(board.positions))
+    return weighted_kabsch(src.reshape(-1, 3), dst.reshape(-1, 3), w)
 
 
 def join_paths(board: Board, problem: GraphProblem, paths: list[tuple[Array, Array, Array]],
-               max_gap_s: float = 0.05) -> tuple[Array, list[int]]:
+               max_gap_s: float = 0.05, parents: list[int] | None = None
+               ) -> tuple[Array, list[int]]:
     """Station poses ``T_world_lh`` (S, 4, 4) (slot 0 = identity) from every slot's path
-    ``(times, T_lh_board, rms_rad)``: a weighted Kabsch (weights 1/rms^2) between the sensor
-    points of each path and of the reference path interpolated to its times, over the pairs
-    whose proposal agrees with the median; and the time-matched pairs per slot."""
-    t_ref, T_ref, _ = paths[0]
+    ``(times, T_lh_board, rms_rad)``, and the time-matched pairs of each slot's join.
+
+    Each station is joined to its parent in the overlap tree (:func:`overlap_tree`; or
+    ``parents``, filled in place when given as an empty list): straight to the reference
+    when every station saw the board within ``max_gap_s`` of it at least
+    :data:`MIN_MATCHES` times (the only case before chaining; unchanged), otherwise through
+    chains of stations that saw it at the same moments (a room where each station overlaps
+    only its neighbours). Each link is :func:`relative_pose`; ``T_world_lh`` of a station
+    is its parent's times the link."""
+    t_ref = paths[0][0]
     if len(t_ref) < 2:
         raise SolverError(f"station {problem.station_ids[0]} (reference): too few usable "
                           "measurements to initialise")
     S = len(problem.station_ids)
-    L0 = np.repeat(np.eye(4)[None], S, axis=0)
-    overlap = [len(t_ref)]
-    for slot in range(1, S):
-        t_s, T_s, rms_s = paths[slot]
-        ok = _match_times(t_s, t_ref, max_gap_s)
-        overlap.append(int(ok.sum()))
-        if ok.sum() < 3:
+    M = pair_matches(paths, max_gap_s)
+    tree = overlap_tree(M)
+    missing = [c for c in range(S) if tree[c] < 0]
+    if missing:
+        ids = problem.station_ids
+        if S == 2:
             raise SolverError(
-                f"station {problem.station_ids[slot]}: the board was never seen by it and the "
-                f"reference station within {max_gap_s * 1e3:.0f} ms ({ok.sum()} matches); "
-                "use a non-planar board or wave it so both stations see it")
-        T_ref_at = interpolate_poses(t_ref, T_ref, t_s[ok])
-        # each matched pair proposes T_ref_s; keep those near the median proposal
-        proposals = T_ref_at @ inverse(T_s[ok])
-        centre = np.median(proposals[:, :3, 3], axis=0)
-        agree = np.linalg.norm(proposals[:, :3, 3] - centre, axis=1)
-        agree = agree <= max(3 * np.median(agree), 0.02)
-        src = transform_points(T_s[ok][agree][:, None], board.positions[None])  # station s
-        dst = transform_points(T_ref_at[agree][:, None], board.positions[None])  # reference
-        w = np.repeat(1.0 / (rms_s[ok][agree] ** 2 + 1e-10), len(board.positions))
-        L0[slot] = weighted_kabsch(src.reshape(-1, 3), dst.reshape(-1, 3), w)
+                f"station {ids[1]}: the board was never seen by it and the reference station "
+                f"within {max_gap_s * 1e3:.0f} ms ({M[0, 1]} matches); use a non-planar board "
+                "or wave it so both stations see it")
+        linked = [ids[c] for c in range(S) if tree[c] >= 0]
+        raise SolverError(
+            f"station(s) {', '.join(str(ids[c]) for c in missing)}: the board was never seen "
+            f"by them at the same time (within {max_gap_s * 1e3:.0f} ms, {MIN_MATCHES} times) "
+            f"as by any of the stations linked to the reference ({', '.join(map(str, linked))}"
+            "); carry the board where they and a linked station both see it")
+    if parents is not None:
+        parents[:] = tree
+    L0 = np.repeat(np.eye(4)[None], S, axis=0)
+    overlap = [len(t_ref)] + [int(M[tree[c], c]) for c in range(1, S)]
+    done = {0}
+    while len(done) < S:  # parents before children
+        for c in range(1, S):
+            if c not in done and tree[c] in done:
+                L0[c] = L0[tree[c]] @ relative_pose(board, paths[tree[c]], paths[c], max_gap_s)
+                done.add(c)
     return L0, overlap
 
 
