@@ -232,3 +232,60 @@ def test_cli_output_under_a_file_is_one_line_exit_2(tmp_path):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "a.csv: is not a directory" in lines[0]
     assert "Traceback" not in proc.stderr
+
+
+LH2_CAL = FactoryCalibration(phase=[0.0, 0.0032], tilt=[-0.052, 0.0497], curve=[-0.36, 0.42],
+                             gibphase=[2.68, 1.02], gibmag=[-0.0007, -0.0016],
+                             ogeephase=[1.22, 2.01], ogeemag=[-0.29, -0.28])
+
+
+def test_lh2_keys_round_trip_in_both_files(tmp_path):
+    T1 = se3_exp([0.1, 0.2, 0.3, 1.0, 2.0, 0.5])
+    lh2 = StationModel(LH2_CAL, generation=2, channel=5)
+    stations = Stations(0, {0: Station(np.eye(4), None, StationModel(generation=2, channel=1)),
+                            1: Station(T1, None, lh2)})
+    back = load_stations(save_stations(stations, tmp_path / "s.toml"))
+    assert back.stations[0].model.generation == 2 and back.stations[0].model.channel == 1
+    m = back.stations[1].model
+    assert (m.generation, m.channel) == (2, 5)
+    for key in ("tilt", "curve", "ogeephase", "ogeemag"):
+        np.testing.assert_allclose(getattr(m.calibration, key), getattr(LH2_CAL, key))
+    cal = {3: StationCalibration(LH2_CAL, 617301407, generation=2, channel=2)}
+    c = load_calibration(save_calibration(cal, tmp_path / "ootx.toml"))[3]
+    assert (c.generation, c.channel, c.id) == (2, 2, 617301407)
+    np.testing.assert_allclose(c.calibration.ogeemag, LH2_CAL.ogeemag)
+    assert c.model().generation == 2
+
+
+def test_lh1_files_keep_their_keys(tmp_path):
+    # an LH1 station writes neither generation nor the LH2 terms: old readers see old files
+    cal = {0: StationCalibration(FactoryCalibration(phase=[0.05, 0.06]), 1)}
+    text = save_calibration(cal, tmp_path / "ootx.toml").read_text()
+    assert "generation" not in text and "ogee" not in text and "channel" not in text
+    back = load_calibration(tmp_path / "ootx.toml")[0]
+    assert back.generation == 1 and back.channel is None
+    st = Stations(0, {0: Station(np.eye(4), None, StationModel(FactoryCalibration(
+        phase=[0.01, 0.0])))})
+    text = save_stations(st, tmp_path / "s.toml").read_text()
+    assert "generation" not in text and "ogee" not in text
+
+
+@pytest.mark.parametrize("extra, message", [
+    ("generation = 3\n", "generation must be 1 or 2"),
+    ("generation = 2\nchannel = 17\n", "channel must be 1-16"),
+    ("generation = 2\nchannel = 0\n", "channel must be 1-16"),
+    ("ogeemag = [0.1, 0.2]\n", "LH2 term: set generation = 2"),
+    ("generation = 2\nogeemag = [0.1]\n", "ogeemag"),
+    ("generation = \"2\"\n", "expected an integer"),
+])
+def test_bad_lh2_keys_name_file_and_key(tmp_path, extra, message):
+    table = ("[lighthouses.0]\nid = 1\nphase = [0, 0]\ntilt = [0, 0]\ncurve = [0, 0]\n"
+             "gibphase = [0, 0]\ngibmag = [0, 0]\n")
+    ootx = _write(tmp_path, "ootx.toml", table + extra)
+    with pytest.raises(InputError, match=message) as err:
+        load_calibration(ootx)
+    assert "ootx.toml:lighthouses.0" in str(err.value)
+    stations = _write(tmp_path, "s.toml", "reference = 0\n[lighthouses.0]\nposition = [0, 0, 0]"
+                      "\nquaternion = [1, 0, 0, 0]\n" + extra)
+    with pytest.raises(InputError, match=message):
+        load_stations(stations)

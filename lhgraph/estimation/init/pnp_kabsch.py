@@ -100,7 +100,8 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
     paths = station_paths(board, angles, problem, pose_solver)
     parents: list[int] = []
     L0, overlap = join_paths(board, problem, paths, max_gap_s, parents)
-    X0, V0 = world_states(paths, L0, problem.state_time, velocity_span_s)
+    lh2 = any(m.generation == 2 for m in problem.models)  # stations see the board at once
+    X0, V0 = world_states(paths, L0, problem.state_time, velocity_span_s, lh2)
     return Initialisation(L0, X0, V0, overlap, parents)
 
 
