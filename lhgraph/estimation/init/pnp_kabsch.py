@@ -14,7 +14,12 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
 from lhgraph.estimation.init.pnp import PnPResult
-from lhgraph.estimation.init.twins import chosen_path, consistent_path, twin_path
+from lhgraph.estimation.init.twins import (
+    TwinPath,
+    chosen_path,
+    consistent_path,
+    twin_path,
+)
 from lhgraph.estimation.problem import GraphProblem
 from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.geometry.kabsch import weighted_kabsch
@@ -56,13 +61,25 @@ def _station_path(board: Board, angles: Angles, problem: GraphProblem, pose_solv
     return meas.time[ok], pnp.T_lh_board[ok], pnp.rms_rad[ok]
 
 
+def _twins(board: Board, angles: Angles, problem: GraphProblem, slot: int) -> TwinPath:
+    """Both planar twins of every merged az/el pair of station slot with 5 sensors (a seen
+    sensor faces the station: on a curved board that rules the wrong twin out)."""
+    return twin_path(board, angles, problem, slot, "merge", min_sensors=5, min_facing=0.8)
+
+
 def _twin_chain_path(board: Board, angles: Angles, problem: GraphProblem, turn_sigma: float,
                      slot: int) -> tuple[Array, Array, Array]:
-    """Station slot's (times, T_lh_board, rms): both planar twins of every merged az/el pair
-    with 5 sensors, the temporally consistent chain of them (a seen sensor faces the
-    station: on a curved board that rules the wrong twin out)."""
-    twins = twin_path(board, angles, problem, slot, "merge", min_sensors=5, min_facing=0.8)
+    """Station slot's (times, T_lh_board, rms): the temporally consistent chain of the
+    planar twins (:func:`_twins`)."""
+    twins = _twins(board, angles, problem, slot)
     return chosen_path(twins, twins.emission, turn_sigma)
+
+
+def _in_threads(one: Callable, n: int) -> list:
+    """``one(slot)`` of slots ``0..n-1`` in parallel threads (numpy releases the GIL in its
+    array loops)."""
+    with ThreadPoolExecutor(max_workers=min(n, len(os.sched_getaffinity(0)))) as pool:
+        return list(pool.map(one, range(n)))
 
 
 def station_paths(board: Board, angles: Angles, problem: GraphProblem,
@@ -73,11 +90,9 @@ def station_paths(board: Board, angles: Angles, problem: GraphProblem,
     rad/sqrt(s): :func:`~lhgraph.estimation.init.twins.resolve_twins`); with
     ``pose_solver`` its pose per measurement. The stations in parallel threads (numpy
     releases the GIL in its array loops)."""
-    slots = range(len(problem.station_ids))
     one = (partial(_twin_chain_path, board, angles, problem, turn_sigma) if pose_solver is None
            else partial(_station_path, board, angles, problem, pose_solver))
-    with ThreadPoolExecutor(max_workers=min(len(slots), len(os.sched_getaffinity(0)))) as pool:
-        return list(pool.map(one, slots))
+    return _in_threads(one, len(problem.station_ids))
 
 
 def _match_times(t_query: Array, t_ref: Array, max_gap_s: float) -> NDArray[np.bool_]:
@@ -92,15 +107,36 @@ def _match_times(t_query: Array, t_ref: Array, max_gap_s: float) -> NDArray[np.b
 
 def initialise(board: Board, angles: Angles, problem: GraphProblem,
                max_gap_s: float = 0.05, velocity_span_s: float = 0.01,
-               pose_solver: PoseSolver | None = None) -> Initialisation:
+               pose_solver: PoseSolver | None = None, turn_sigma: float = 1.0,
+               cross_sigma_rad: float = 0.15) -> Initialisation:
     """Initial values from per-station PnP paths (:func:`station_paths`: the Viterbi's chain
     of planar twins, or ``pose_solver`` per measurement) joined by weighted Kabsch on sensor
     points over the stations' overlap tree (:func:`join_paths`); twists from the merged
-    path's change over ``velocity_span_s``."""
-    paths = station_paths(board, angles, problem, pose_solver)
+    path's change over ``velocity_span_s``.
+
+    LH2 stations see the board at the same moments, so there (default pose solver) the twins
+    are chosen again once the stations are joined, each station's Viterbi also scoring how
+    far each twin turns from the other stations' twins at the nearest moment
+    (:func:`~lhgraph.estimation.init.few_diode.cross_station_cost`, spread
+    ``cross_sigma_rad``), and the stations joined again on those paths: in a simulated
+    4-station room a station looking down on the flat board picked the mirror twin for
+    seconds on end (4 stretches of 1-4 s), which merged paths turn into states 140° off that
+    LM had not turned round after 60 iterations. Twists there come from each station's own
+    path (:func:`world_states`, ``twist_per_path``). LH1 stations take turns: unchanged."""
+    lh2 = any(m.generation == 2 for m in problem.models)
     parents: list[int] = []
+    if lh2 and pose_solver is None:
+        from lhgraph.estimation.init.few_diode import cross_station_cost  # imports this module
+
+        twins = _in_threads(partial(_twins, board, angles, problem), len(problem.station_ids))
+        paths = [chosen_path(tw, tw.emission, turn_sigma) for tw in twins]
+        L0, overlap = join_paths(board, problem, paths, max_gap_s)
+        paths = [chosen_path(tw, tw.emission + cross_station_cost(
+            twins, L0, slot, cross_sigma_rad, max_gap_s, turn_sigma), turn_sigma)
+            for slot, tw in enumerate(twins)]
+    else:
+        paths = station_paths(board, angles, problem, pose_solver, turn_sigma)
     L0, overlap = join_paths(board, problem, paths, max_gap_s, parents)
-    lh2 = any(m.generation == 2 for m in problem.models)  # stations see the board at once
     X0, V0 = world_states(paths, L0, problem.state_time, velocity_span_s, lh2)
     return Initialisation(L0, X0, V0, overlap, parents)
 
