@@ -39,6 +39,7 @@ from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import Station, Stations
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.board import Board
+from lhgraph.model.station import IDEAL as IDEAL_LH1
 from lhgraph.model.station import StationModel
 
 Array = NDArray[np.float64]
@@ -79,7 +80,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         raise SolverError(f"only station(s) {stations} seen: need at least two")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    angles, options, few = few_diode_preparation(angles, options, progress, models)
+    angles, options, few = graph_preparation(angles, options, progress, models)
     problem = build_problem(board, angles, models, reference)
     if initialiser is None:
         initialiser = FewDiodeInitialiser() if few else PnPKabschInitialiser()
@@ -132,21 +133,31 @@ def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation
     return fit, ev, cov
 
 
-def few_diode_preparation(angles: Angles, options: GraphOptions,
+def graph_preparation(angles: Angles, options: GraphOptions,
                           progress: Progress | None = None,
                           models: dict[int, StationModel] | None = None
                           ) -> tuple[Angles, GraphOptions, bool]:
-    """``angles``, ``options`` and whether the data is few-diode, made ready for the graph:
-    the LH1 sweeps of few-diode data, or of a receiver that logs a station's two sweeps
-    together, on each station's rotor grid with one board state per rotor cycle
-    (``options.sweep_times``, :func:`retime_cycles`; with LH2 stations in ``models``, whose
-    hit times the importer derives from the planes' rotor angles, both planes of a turn
-    share a state: :func:`plane_cycles`), and on few-diode data the angle-noise
-    floor ``few_diode_sigma_rad`` and, unless set, the stopping rule's board-step quantile
-    ``FEW_DIODE_STEP_QUANTILE``. Shared by the calibration and by tracking."""
+    """``angles``, ``options`` and whether the data is few-diode, made ready for the graph
+    by the stations' generation (``models``) and the receiver's diodes:
+
+    - LH1 sweeps of few-diode data, or of a receiver that logs a station's two sweeps
+      together, on each station's rotor grid with one board state per rotor cycle
+      (``options.sweep_times``, :func:`retime_cycles`);
+    - LH2 few-diode data, whose hit times the importer derives from the planes' rotor
+      angles: both planes of a turn share a state (:func:`plane_cycles`);
+    - every station LH2: the angle-noise floor and the sweep-offset noise
+      ``options.lh2_angle_sigma_rad`` / ``lh2_sweep_offset_sigma_rad``;
+    - few-diode data: the angle-noise floor ``few_diode_sigma_rad`` and, unless set, the
+      stopping rule's board-step quantile ``FEW_DIODE_STEP_QUANTILE``.
+
+    Shared by the calibration and by tracking."""
     few = few_diode(angles)
     logged = co_logged_stations(angles)
     lh2 = any(m.generation == 2 for m in (models or {}).values())
+    if lh2 and all((models or {}).get(s, IDEAL_LH1).generation == 2
+                   for s in angles.stations()):
+        options = replace(options, angle_sigma_rad=options.lh2_angle_sigma_rad,
+                          sweep_offset_sigma_rad=options.lh2_sweep_offset_sigma_rad)
     if options.sweep_times == "auto" and few and lh2:
         angles = plane_cycles(angles)
         if progress:

@@ -8,7 +8,7 @@ no station variable; Levenberg-Marquardt and the noise adaptation as in
 (:func:`lhgraph.estimation.init.pnp_kabsch.station_paths`) put into the world by the known
 ``T_world_lh`` and merged by time (:func:`~lhgraph.estimation.init.pnp_kabsch.world_states`).
 Few-diode data (the Crazyflie deck: 4 diodes, of which a sweep holds ~3) is prepared as for
-the calibration (:func:`~lhgraph.estimation.graph.solver.few_diode_preparation`: one state
+the calibration (:func:`~lhgraph.estimation.graph.solver.graph_preparation`: one state
 per station rotor cycle) and starts from the planar twins with the stations known
 (:meth:`~lhgraph.estimation.init.few_diode.FewDiodeInitialiser.with_stations`). Each state's
 position standard deviation ``sigma_m`` (from the marginal covariance) says how well its
@@ -31,7 +31,7 @@ from lhgraph.estimation.graph.factors import build_graph
 from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import LMParams, OptimizerResult, levenberg_marquardt
 from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.solver import few_diode_preparation
+from lhgraph.estimation.graph.solver import graph_preparation
 from lhgraph.estimation.graph.variables import BOARD_POSE, initial_values
 from lhgraph.estimation.inertial import inertial_data, start_with_imu
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
@@ -240,7 +240,7 @@ def track(board: Board, angles: Angles, stations: Stations,
     angular rates are the gyro's, and the IMU bias and the world's gravity are estimated."""
     options = options or GraphOptions()
     t0 = time.perf_counter()
-    angles, options, few = few_diode_preparation(
+    angles, options, few = graph_preparation(
         angles, options, progress, models or {k: stations.stations[k].model
                                               for k in stations.indices()})
     problem, T_world_lh = tracking_problem(board, angles, stations, models)

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
-from lhgraph.estimation.init.pnp import PnPResult
+from lhgraph.estimation.init.pnp import PnPResult, planar_twins
 from lhgraph.estimation.init.twins import (
     TwinPath,
     chosen_path,
@@ -26,6 +26,7 @@ from lhgraph.geometry.kabsch import weighted_kabsch
 from lhgraph.geometry.transforms import interpolate_poses, inverse, se3_log, transform_points
 from lhgraph.io.angles import Angles
 from lhgraph.model.board import Board
+from lhgraph.model.station import IDEAL, ideal_from_measured
 
 Array = NDArray[np.float64]
 PoseSolver = Callable[..., PnPResult]
@@ -38,13 +39,15 @@ class Initialisation:
     """Initial values: station poses ``L`` (S, 4, 4) (slot 0 = identity), board poses ``X``
     (K, 4, 4) and twists ``V`` (K, 6); ``overlap`` = time-matched pose pairs per station
     with the station it was joined to, ``parents`` that station's slot (slot 0: itself;
-    :func:`join_paths`; empty when not known)."""
+    :func:`join_paths`; empty when not known), ``matches`` the time-matched pairs between
+    every two stations' paths (:func:`pair_matches`; None when not known)."""
 
     L: Array
     X: Array
     V: Array
     overlap: list[int] = field(default_factory=list)
     parents: list[int] = field(default_factory=list)
+    matches: NDArray[np.int64] | None = None
 
 
 def _station_path(board: Board, angles: Angles, problem: GraphProblem, pose_solver: PoseSolver,
@@ -61,17 +64,38 @@ def _station_path(board: Board, angles: Angles, problem: GraphProblem, pose_solv
     return meas.time[ok], pnp.T_lh_board[ok], pnp.rms_rad[ok]
 
 
-def _twins(board: Board, angles: Angles, problem: GraphProblem, slot: int) -> TwinPath:
-    """Both planar twins of every merged az/el pair of station slot with 5 sensors (a seen
-    sensor faces the station: on a curved board that rules the wrong twin out)."""
-    return twin_path(board, angles, problem, slot, "merge", min_sensors=5, min_facing=0.8)
+def _lh2_twins(board: Board, angles: Angles, problem: GraphProblem, slot: int,
+               fit_sigma_rad: float = 1e-4) -> TwinPath:
+    """Both planar twins (as :func:`_twin_chain_path`) of an LH2 station, from its
+    measurements' ideal LH1-equivalent angles
+    (:func:`~lhgraph.model.station.ideal_from_measured`: calibration inverted, the planes'
+    pair converted), solved as an ideal LH1 station (emission and facing as
+    :func:`~lhgraph.estimation.init.twins.twin_path`). ``planar_twins`` seeds its homography
+    with the tangents of the two angles it is given, which for LH2's tilted planes is no
+    projection: off the optical axis (|azimuth| and |elevation| ~45°, or elevation near the
+    50° edge of the view) both twins then converged 60-150° away from the board, for 5-30 %
+    of a station's measurements in a simulated room (none from the converted angles)."""
+    s = problem.station_ids[slot]
+    station = angles.select(angles.lighthouse == s)
+    if len(station) == 0:
+        return TwinPath(np.empty(0), np.empty((0, 2, 4, 4)), np.empty((0, 2)),
+                        np.empty((0, 2)))
+    meas = reconstruct_measurements(station, board, "merge")
+    az, el = ideal_from_measured(meas.azimuth, meas.elevation, problem.models[slot])
+    twins = planar_twins(az, el, board.positions, board.normals, IDEAL, min_sensors=5)
+    chi2 = 2 * twins.n_sensors[:, None] * (twins.rms_rad / fit_sigma_rad) ** 2
+    emission = np.where((twins.facing > 0.8) & np.isfinite(chi2), chi2, np.inf)
+    valid = np.isfinite(emission).any(axis=1)
+    return TwinPath(meas.time[valid], twins.T_lh_board[valid], twins.rms_rad[valid],
+                    emission[valid])
 
 
 def _twin_chain_path(board: Board, angles: Angles, problem: GraphProblem, turn_sigma: float,
                      slot: int) -> tuple[Array, Array, Array]:
-    """Station slot's (times, T_lh_board, rms): the temporally consistent chain of the
-    planar twins (:func:`_twins`)."""
-    twins = _twins(board, angles, problem, slot)
+    """Station slot's (times, T_lh_board, rms): both planar twins of every merged az/el pair
+    with 5 sensors, the temporally consistent chain of them (a seen sensor faces the
+    station: on a curved board that rules the wrong twin out)."""
+    twins = twin_path(board, angles, problem, slot, "merge", min_sensors=5, min_facing=0.8)
     return chosen_path(twins, twins.emission, turn_sigma)
 
 
@@ -107,38 +131,28 @@ def _match_times(t_query: Array, t_ref: Array, max_gap_s: float) -> NDArray[np.b
 
 def initialise(board: Board, angles: Angles, problem: GraphProblem,
                max_gap_s: float = 0.05, velocity_span_s: float = 0.01,
-               pose_solver: PoseSolver | None = None, turn_sigma: float = 1.0,
-               cross_sigma_rad: float = 0.15) -> Initialisation:
+               pose_solver: PoseSolver | None = None, turn_sigma: float = 1.0
+               ) -> Initialisation:
     """Initial values from per-station PnP paths (:func:`station_paths`: the Viterbi's chain
-    of planar twins, or ``pose_solver`` per measurement) joined by weighted Kabsch on sensor
-    points over the stations' overlap tree (:func:`join_paths`); twists from the merged
-    path's change over ``velocity_span_s``.
+    of planar twins, random walk ``turn_sigma`` rad/sqrt(s), or ``pose_solver`` per
+    measurement) joined by weighted Kabsch on sensor points over the stations' overlap tree
+    (:func:`join_paths`); twists from the merged path's change over ``velocity_span_s``.
 
-    LH2 stations see the board at the same moments, so there (default pose solver) the twins
-    are chosen again once the stations are joined, each station's Viterbi also scoring how
-    far each twin turns from the other stations' twins at the nearest moment
-    (:func:`~lhgraph.estimation.init.few_diode.cross_station_cost`, spread
-    ``cross_sigma_rad``), and the stations joined again on those paths: in a simulated
-    4-station room a station looking down on the flat board picked the mirror twin for
-    seconds on end (4 stretches of 1-4 s), which merged paths turn into states 140° off that
-    LM had not turned round after 60 iterations. Twists there come from each station's own
-    path (:func:`world_states`, ``twist_per_path``). LH1 stations take turns: unchanged."""
+    LH2 stations (default pose solver): the twins from the ideal LH1-equivalent angles
+    (:func:`_lh2_twins`), and the twists from each station's own path (:func:`world_states`,
+    ``twist_per_path``: LH2 stations see the board at the same moments, and the merged path
+    alternates between stations placed cm apart before the solve)."""
     lh2 = any(m.generation == 2 for m in problem.models)
-    parents: list[int] = []
     if lh2 and pose_solver is None:
-        from lhgraph.estimation.init.few_diode import cross_station_cost  # imports this module
-
-        twins = _in_threads(partial(_twins, board, angles, problem), len(problem.station_ids))
+        twins = _in_threads(partial(_lh2_twins, board, angles, problem),
+                            len(problem.station_ids))
         paths = [chosen_path(tw, tw.emission, turn_sigma) for tw in twins]
-        L0, overlap = join_paths(board, problem, paths, max_gap_s)
-        paths = [chosen_path(tw, tw.emission + cross_station_cost(
-            twins, L0, slot, cross_sigma_rad, max_gap_s, turn_sigma), turn_sigma)
-            for slot, tw in enumerate(twins)]
     else:
         paths = station_paths(board, angles, problem, pose_solver, turn_sigma)
+    parents: list[int] = []
     L0, overlap = join_paths(board, problem, paths, max_gap_s, parents)
     X0, V0 = world_states(paths, L0, problem.state_time, velocity_span_s, lh2)
-    return Initialisation(L0, X0, V0, overlap, parents)
+    return Initialisation(L0, X0, V0, overlap, parents, pair_matches(paths, max_gap_s))
 
 
 MIN_MATCHES = 3
