@@ -99,3 +99,12 @@ def test_join_paths_chains_and_names_an_unlinked_station():
     windows[2] = (6, 7)
     with pytest.raises(SolverError, match="station\\(s\\) 2:"):
         join_paths(board, problem, _paths(windows, L))
+
+
+def test_weak_link_warning_names_the_chain():
+    from lhgraph.estimation.graph.solver import _chain
+
+    # slot 3 was joined to slot 1, slot 1 to the reference
+    assert _chain(3, [0, 0, 3, 1]) == [3, 1, 0]
+    assert _chain(2, [0, 0, 3, 1]) == [2, 3, 1, 0]
+    assert _chain(2, []) == [2, 0]  # parents unknown: the station and the reference

@@ -104,7 +104,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
                       error_history=light.error_history + fit.error_history)
     timings["optimise"] = time.perf_counter() - t1
     ev.evaluate(fit.values)
-    return _result(angles, problem, ev, fit, cov, options, timings, t0)
+    return _result(angles, problem, ev, fit, cov, options, timings, t0, init.parents)
 
 
 def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation,
@@ -174,15 +174,26 @@ def graph_preparation(angles: Angles, options: GraphOptions,
     return angles, options, few
 
 
+def _chain(slot: int, parents: list[int]) -> list[int]:
+    """Slots from ``slot`` to the reference (slot 0) along ``parents`` (``[slot, 0]`` when
+    the parents are not known)."""
+    chain = [slot]
+    while chain[-1] != 0 and len(chain) <= len(parents):
+        chain.append(parents[chain[-1]] if chain[-1] < len(parents) else 0)
+    return chain if chain[-1] == 0 else [slot, 0]
+
+
 def few_diode(angles: Angles) -> bool:
     """Whether the median sweep of ``angles`` holds fewer than ``FEW_DIODES`` hits."""
     return bool(np.median(np.bincount(angles.sweep_ids())) < FEW_DIODES)
 
 
 def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: OptimizerResult,
-            cov: dict[int, Array], options: GraphOptions, timings: dict[str, float], t0: float
-            ) -> SolveResult:
-    """The :class:`SolveResult` of a finished solve, ``ev`` evaluated at the result."""
+            cov: dict[int, Array], options: GraphOptions, timings: dict[str, float], t0: float,
+            parents: list[int] | None = None) -> SolveResult:
+    """The :class:`SolveResult` of a finished solve, ``ev`` evaluated at the result;
+    ``parents``: the slot each station's initial pose was joined to (the initialiser's
+    overlap tree), for the weak-link warning."""
     reference = problem.station_ids[0]
     poses = ev.station_poses()
     out: dict[int, Station] = {reference: Station(np.eye(4), np.zeros((6, 6)),
@@ -193,8 +204,11 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
         out[sid] = Station(poses[slot].copy(), cov[slot], problem.models[slot])
         sigma_m = float(np.sqrt(np.max(np.linalg.eigvalsh(cov[slot][3:, 3:]))))
         if sigma_m > options.weak_link_sigma_m:
+            chain = _chain(slot, parents or [])
+            via = (" by both" if len(chain) <= 2 else " by two neighbours of the chain "
+                   + " - ".join(str(problem.station_ids[c]) for c in chain))
             warnings.append(f"station {sid}: weak link to the reference (position sigma "
-                            f"{sigma_m * 1e3:.0f} mm); the board was rarely seen by both")
+                            f"{sigma_m * 1e3:.0f} mm); the board was rarely seen{via}")
     h = problem.hits
     rows = problem.hit_rows
     residuals = Residuals(angles.time[rows], angles.lighthouse[rows], h.axis,
