@@ -108,3 +108,17 @@ def test_weak_link_warning_names_the_chain():
     assert _chain(3, [0, 0, 3, 1]) == [3, 1, 0]
     assert _chain(2, [0, 0, 3, 1]) == [2, 3, 1, 0]
     assert _chain(2, []) == [2, 0]  # parents unknown: the station and the reference
+
+
+def test_eight_station_room():
+    base = load_simulation_config(CONFIGS / "simulation/lh2_room8.toml")
+    # once round the room in 15 s instead of 30: half the hits, every station still sees it
+    config = dataclasses.replace(base, duration_s=15.0, motion=dataclasses.replace(
+        base.motion, speed_mps=2 * base.motion.speed_mps))
+    sim, result = _solve(config, 4)
+    errors = station_errors(sim.truth, result.stations)
+    assert [e.station for e in errors] == list(range(1, 8))
+    for e in errors:
+        assert e.position_norm_m < 2e-3, e
+        assert np.degrees(e.rotation_rad) < 0.05, e
+    assert result.status == "converged" and not result.warnings
