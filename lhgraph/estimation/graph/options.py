@@ -43,13 +43,14 @@ class GraphOptions:
     floor of the angle noise on few-diode data instead of ``angle_sigma_rad`` (a real LH1
     station's noise, SPEC §3; with ~7 hits per state, the state's pose and offset absorb
     much of the residual, so their spread underestimates the noise);
-    ``lh2_angle_sigma_rad`` / ``lh2_sweep_offset_sigma_rad``: the angle-noise floor and the
-    sweep-offset noise when every station is LH2 (SteamVR 2.0), instead of
-    ``angle_sigma_rad`` / ``sweep_offset_sigma_rad``: a receiver decodes LH2 with its own
-    fast timer (the deck's 24 MHz: 13 µrad a tick), not the board's 2 MHz sampler, and an
-    LH2 station has no sync flash whose sampled edge would offset a whole sweep (on 12
-    simulated protocol captures the LH1 values left the covariance pessimistic: mean NEES
-    2.4 of 6);
+    ``lh2_angle_sigma_rad``: the angle-noise floor when every station is LH2 (SteamVR 2.0),
+    instead of ``angle_sigma_rad``: a receiver decodes LH2 with its own fast timer (the
+    deck's 24 MHz: 13 µrad a tick), not the board's 2 MHz sampler (on 12 simulated protocol
+    captures the LH1 floor left the covariance pessimistic: mean NEES 2.4 of 6, 4.0 with
+    this one). The sweep offsets stay: an LH2 station has no sync flash, but on the real
+    LH2 log, holding them at zero took 51 LM iterations against 19, for a geometry no better
+    (measure (b) 6.6 against 6.5 mm): they absorb what the deck's hit times leave of a
+    sweep's common error);
     ``max_board_step_rad`` / ``max_board_step_m``: when an LM step raises the error, it is
     tried again with each board state's rotation / translation step scaled down to these
     (a trust region per state: a state far from its solution, e.g. a mirror pose, turns this
@@ -87,7 +88,6 @@ class GraphOptions:
     board_step_quantile: float | None = option(None, kind=float, gt=0, le=1)
     few_diode_sigma_rad: float = option(6.5e-5, gt=0)
     lh2_angle_sigma_rad: float = option(1e-5, gt=0)
-    lh2_sweep_offset_sigma_rad: float = option(1e-7, gt=0)
     max_board_step_rad: float = option(0.3, gt=0)
     max_board_step_m: float = option(0.1, gt=0)
     gyro_sigma_rad_s: float = option(0.02, gt=0)

@@ -145,8 +145,7 @@ def graph_preparation(angles: Angles, options: GraphOptions,
       (``options.sweep_times``, :func:`retime_cycles`);
     - LH2 few-diode data, whose hit times the importer derives from the planes' rotor
       angles: both planes of a turn share a state (:func:`plane_cycles`);
-    - every station LH2: the angle-noise floor and the sweep-offset noise
-      ``options.lh2_angle_sigma_rad`` / ``lh2_sweep_offset_sigma_rad``;
+    - every station LH2: the angle-noise floor ``options.lh2_angle_sigma_rad``;
     - few-diode data: the angle-noise floor ``few_diode_sigma_rad`` and, unless set, the
       stopping rule's board-step quantile ``FEW_DIODE_STEP_QUANTILE``.
 
@@ -156,8 +155,7 @@ def graph_preparation(angles: Angles, options: GraphOptions,
     lh2 = any(m.generation == 2 for m in (models or {}).values())
     if lh2 and all((models or {}).get(s, IDEAL_LH1).generation == 2
                    for s in angles.stations()):
-        options = replace(options, angle_sigma_rad=options.lh2_angle_sigma_rad,
-                          sweep_offset_sigma_rad=options.lh2_sweep_offset_sigma_rad)
+        options = replace(options, angle_sigma_rad=options.lh2_angle_sigma_rad)
     if options.sweep_times == "auto" and few and lh2:
         angles = plane_cycles(angles)
         if progress:
