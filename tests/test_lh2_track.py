@@ -56,3 +56,14 @@ def test_cli_solves_an_lh2_capture(tmp_path, capsys):
     if (tmp_path / "lh1.toml").exists():
         lh1 = station_errors(cap.truth, load_stations(tmp_path / "lh1.toml"))[0]
         assert lh1.position_norm_m > 0.05
+
+
+def test_paper_method_refuses_lh2(tmp_path, capsys):
+    cap = simulate(dataclasses.replace(load_simulation_config(CONFIG), duration_s=1.0), 1)
+    paths = write_simulation(cap, tmp_path)
+    out = tmp_path / "paper.toml"
+    assert main(["solve", "--board", str(paths["board"]), "--angles", str(paths["angles"]),
+                 "--calibration", str(paths["ootx"]), "--method", "paper", "--output",
+                 str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "LH1 stations" in err[0] and not out.exists()

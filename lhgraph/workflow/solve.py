@@ -48,7 +48,9 @@ def solve(board: Board, angles: Angles, method: str = "graph",
     """Calibrate the stations seen in ``angles`` with ``method`` ("graph" or "paper").
 
     ``imu``: the receiver's IMU stream, for the graph's IMU refinement (the paper's method
-    has no use for it: InputError).
+    has no use for it: InputError). The paper's method is for LH1 stations, as the paper's
+    own (LH2 stations in ``models``: InputError; on a simulated two-station LH2 capture it
+    returned station 1 6.6 m off with only a warning).
 
     The world is the reference station's frame, or with ``world_up`` (station index -> up
     vector in the station frame, :func:`lhgraph.estimation.gravity.up_vectors`) gravity-aligned:
@@ -67,6 +69,10 @@ def solve(board: Board, angles: Angles, method: str = "graph",
         if imu is not None:
             raise InputError("the paper's method does not use an IMU: drop 'imu' (--imu) or "
                              "solve with the graph", where="imu")
+        lh2 = sorted(k for k, m in (models or {}).items() if m.generation == 2)
+        if lh2:
+            raise InputError(f"the paper's method is for LH1 stations; station(s) {lh2} are "
+                             "LH2 (SteamVR 2.0): solve with the graph", where="method")
         from lhgraph.estimation.baseline import solve_paper
 
         staged = None if progress is None else (
