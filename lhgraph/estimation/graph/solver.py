@@ -39,7 +39,6 @@ from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import Station, Stations
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.board import Board
-from lhgraph.model.station import IDEAL as IDEAL_LH1
 from lhgraph.model.station import StationModel
 
 Array = NDArray[np.float64]
@@ -153,8 +152,7 @@ def graph_preparation(angles: Angles, options: GraphOptions,
     few = few_diode(angles)
     logged = co_logged_stations(angles)
     lh2 = any(m.generation == 2 for m in (models or {}).values())
-    if lh2 and all((models or {}).get(s, IDEAL_LH1).generation == 2
-                   for s in angles.stations()):
+    if lh2 and all(s in models and models[s].generation == 2 for s in angles.stations()):
         options = replace(options, angle_sigma_rad=options.lh2_angle_sigma_rad)
     if options.sweep_times == "auto" and few and lh2:
         angles = plane_cycles(angles)

@@ -13,8 +13,6 @@ initialiser (:func:`~lhgraph.estimation.init.pnp_kabsch.join_paths`).
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import partial
 
@@ -22,7 +20,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
-from lhgraph.estimation.init.pnp_kabsch import Initialisation, join_paths, world_states
+from lhgraph.estimation.init.pnp_kabsch import (
+    Initialisation,
+    in_threads,
+    join_paths,
+    world_states,
+)
 from lhgraph.estimation.init.twins import TwinPath, chosen_path, twin_path
 from lhgraph.estimation.problem import GraphProblem
 from lhgraph.geometry.transforms import inverse, rotation_angle
@@ -140,8 +143,7 @@ class FewDiodeInitialiser:
     def _twins(self, board: Board, angles: Angles, problem: GraphProblem) -> list[TwinPath]:
         S = len(problem.station_ids)
         # the stations in parallel threads (numpy releases the GIL in its array loops)
-        with ThreadPoolExecutor(max_workers=min(S, len(os.sched_getaffinity(0)))) as pool:
-            return list(pool.map(partial(twin_path, board, angles, problem), range(S)))
+        return in_threads(partial(twin_path, board, angles, problem), S)
 
     def _agreeing_paths(self, twins: list[TwinPath], T_world_lh: Array
                         ) -> list[tuple[Array, Array, Array]]:

@@ -13,20 +13,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
-from lhgraph.estimation.init.pnp import PnPResult, planar_twins
-from lhgraph.estimation.init.twins import (
-    TwinPath,
-    chosen_path,
-    consistent_path,
-    twin_path,
-)
+from lhgraph.estimation.init.pnp import PnPResult
+from lhgraph.estimation.init.twins import chosen_path, consistent_path, twin_path
 from lhgraph.estimation.problem import GraphProblem
 from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.geometry.kabsch import weighted_kabsch
 from lhgraph.geometry.transforms import interpolate_poses, inverse, se3_log, transform_points
 from lhgraph.io.angles import Angles
 from lhgraph.model.board import Board
-from lhgraph.model.station import IDEAL, ideal_from_measured
 
 Array = NDArray[np.float64]
 PoseSolver = Callable[..., PnPResult]
@@ -64,32 +58,6 @@ def _station_path(board: Board, angles: Angles, problem: GraphProblem, pose_solv
     return meas.time[ok], pnp.T_lh_board[ok], pnp.rms_rad[ok]
 
 
-def _lh2_twins(board: Board, angles: Angles, problem: GraphProblem, slot: int,
-               fit_sigma_rad: float = 1e-4) -> TwinPath:
-    """Both planar twins (as :func:`_twin_chain_path`) of an LH2 station, from its
-    measurements' ideal LH1-equivalent angles
-    (:func:`~lhgraph.model.station.ideal_from_measured`: calibration inverted, the planes'
-    pair converted), solved as an ideal LH1 station (emission and facing as
-    :func:`~lhgraph.estimation.init.twins.twin_path`). ``planar_twins`` seeds its homography
-    with the tangents of the two angles it is given, which for LH2's tilted planes is no
-    projection: off the optical axis (|azimuth| and |elevation| ~45°, or elevation near the
-    50° edge of the view) both twins then converged 60-150° away from the board, for 5-30 %
-    of a station's measurements in a simulated room (none from the converted angles)."""
-    s = problem.station_ids[slot]
-    station = angles.select(angles.lighthouse == s)
-    if len(station) == 0:
-        return TwinPath(np.empty(0), np.empty((0, 2, 4, 4)), np.empty((0, 2)),
-                        np.empty((0, 2)))
-    meas = reconstruct_measurements(station, board, "merge")
-    az, el = ideal_from_measured(meas.azimuth, meas.elevation, problem.models[slot])
-    twins = planar_twins(az, el, board.positions, board.normals, IDEAL, min_sensors=5)
-    chi2 = 2 * twins.n_sensors[:, None] * (twins.rms_rad / fit_sigma_rad) ** 2
-    emission = np.where((twins.facing > 0.8) & np.isfinite(chi2), chi2, np.inf)
-    valid = np.isfinite(emission).any(axis=1)
-    return TwinPath(meas.time[valid], twins.T_lh_board[valid], twins.rms_rad[valid],
-                    emission[valid])
-
-
 def _twin_chain_path(board: Board, angles: Angles, problem: GraphProblem, turn_sigma: float,
                      slot: int) -> tuple[Array, Array, Array]:
     """Station slot's (times, T_lh_board, rms): both planar twins of every merged az/el pair
@@ -99,7 +67,7 @@ def _twin_chain_path(board: Board, angles: Angles, problem: GraphProblem, turn_s
     return chosen_path(twins, twins.emission, turn_sigma)
 
 
-def _in_threads(one: Callable, n: int) -> list:
+def in_threads(one: Callable, n: int) -> list:
     """``one(slot)`` of slots ``0..n-1`` in parallel threads (numpy releases the GIL in its
     array loops)."""
     with ThreadPoolExecutor(max_workers=min(n, len(os.sched_getaffinity(0)))) as pool:
@@ -116,7 +84,7 @@ def station_paths(board: Board, angles: Angles, problem: GraphProblem,
     releases the GIL in its array loops)."""
     one = (partial(_twin_chain_path, board, angles, problem, turn_sigma) if pose_solver is None
            else partial(_station_path, board, angles, problem, pose_solver))
-    return _in_threads(one, len(problem.station_ids))
+    return in_threads(one, len(problem.station_ids))
 
 
 def _match_times(t_query: Array, t_ref: Array, max_gap_s: float) -> NDArray[np.bool_]:
@@ -139,20 +107,23 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
     (:func:`join_paths`); twists from the merged path's change over ``velocity_span_s``.
 
     LH2 stations (default pose solver): the twins from the ideal LH1-equivalent angles
-    (:func:`_lh2_twins`), and the twists from each station's own path (:func:`world_states`,
-    ``twist_per_path``: LH2 stations see the board at the same moments, and the merged path
-    alternates between stations placed cm apart before the solve)."""
+    (:func:`~lhgraph.estimation.init.twins.twin_path` with ``ideal_lh1``), and the twists
+    from each station's own path (:func:`world_states`, ``twist_per_path``: LH2 stations see
+    the board at the same moments, and the merged path alternates between stations placed
+    cm apart before the solve)."""
     lh2 = any(m.generation == 2 for m in problem.models)
     if lh2 and pose_solver is None:
-        twins = _in_threads(partial(_lh2_twins, board, angles, problem),
+        twins = in_threads(partial(twin_path, board, angles, problem, reconstruction="merge",
+                                    min_sensors=5, min_facing=0.8, ideal_lh1=True),
                             len(problem.station_ids))
         paths = [chosen_path(tw, tw.emission, turn_sigma) for tw in twins]
     else:
         paths = station_paths(board, angles, problem, pose_solver, turn_sigma)
     parents: list[int] = []
-    L0, overlap = join_paths(board, problem, paths, max_gap_s, parents)
+    matches = pair_matches(paths, max_gap_s)
+    L0, overlap = join_paths(board, problem, paths, max_gap_s, parents, matches)
     X0, V0 = world_states(paths, L0, problem.state_time, velocity_span_s, lh2)
-    return Initialisation(L0, X0, V0, overlap, parents, pair_matches(paths, max_gap_s))
+    return Initialisation(L0, X0, V0, overlap, parents, matches)
 
 
 MIN_MATCHES = 3
@@ -218,8 +189,8 @@ def relative_pose(board: Board, parent: tuple[Array, Array, Array],
 
 
 def join_paths(board: Board, problem: GraphProblem, paths: list[tuple[Array, Array, Array]],
-               max_gap_s: float = 0.05, parents: list[int] | None = None
-               ) -> tuple[Array, list[int]]:
+               max_gap_s: float = 0.05, parents: list[int] | None = None,
+               matches: NDArray[np.int64] | None = None) -> tuple[Array, list[int]]:
     """Station poses ``T_world_lh`` (S, 4, 4) (slot 0 = identity) from every slot's path
     ``(times, T_lh_board, rms_rad)``, and the time-matched pairs of each slot's join.
 
@@ -229,13 +200,14 @@ def join_paths(board: Board, problem: GraphProblem, paths: list[tuple[Array, Arr
     :data:`MIN_MATCHES` times (the only case before chaining; unchanged), otherwise through
     chains of stations that saw it at the same moments (a room where each station overlaps
     only its neighbours). Each link is :func:`relative_pose`; ``T_world_lh`` of a station
-    is its parent's times the link."""
+    is its parent's times the link. ``matches``: the paths' :func:`pair_matches` when the
+    caller has them already."""
     t_ref = paths[0][0]
     if len(t_ref) < 2:
         raise SolverError(f"station {problem.station_ids[0]} (reference): too few usable "
                           "measurements to initialise")
     S = len(problem.station_ids)
-    M = pair_matches(paths, max_gap_s)
+    M = pair_matches(paths, max_gap_s) if matches is None else matches
     tree = overlap_tree(M)
     missing = [c for c in range(S) if tree[c] < 0]
     if missing:

@@ -25,6 +25,7 @@ from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.geometry.transforms import rotation_angle
 from lhgraph.io.angles import Angles
 from lhgraph.model.board import Board
+from lhgraph.model.station import IDEAL, ideal_from_measured
 
 Array = NDArray[np.float64]
 
@@ -106,20 +107,30 @@ class TwinPath:
 
 def twin_path(board: Board, angles: Angles, problem: GraphProblem, slot: int,
               reconstruction: str = "full", min_sensors: int = 4, min_facing: float = 0.5,
-              fit_sigma_rad: float = 1e-4) -> TwinPath:
+              fit_sigma_rad: float = 1e-4, ideal_lh1: bool = False) -> TwinPath:
     """Station slot's measurements (``reconstruction`` as in
     :func:`~lhgraph.estimation.reconstruct.reconstruct_measurements`) and both planar twins
     of each with at least ``min_sensors`` sensors on both axes; emission = the twin's
     chi-square at ``fit_sigma_rad``, a twin with less than ``min_facing`` of its seen
-    sensors facing the station is impossible."""
+    sensors facing the station is impossible. With ``ideal_lh1`` the twins are solved from
+    the measurements' ideal LH1-equivalent angles
+    (:func:`~lhgraph.model.station.ideal_from_measured`: calibration inverted, an LH2 pair
+    converted) as an ideal LH1 station: ``planar_twins`` seeds its homography with the
+    tangents of the two angles it is given, which for LH2's tilted planes is no projection
+    (off the optical axis both twins then converged 60-150° away from the board, for 5-30 %
+    of a station's measurements in a simulated room; none from the converted angles)."""
     s = problem.station_ids[slot]
     station = angles.select(angles.lighthouse == s)
     if len(station) == 0:
         return TwinPath(np.empty(0), np.empty((0, 2, 4, 4)), np.empty((0, 2)),
                         np.empty((0, 2)))
     meas = reconstruct_measurements(station, board, reconstruction)
-    twins = planar_twins(meas.azimuth, meas.elevation, board.positions, board.normals,
-                         problem.models[slot], min_sensors=min_sensors)
+    a0, a1, model = meas.azimuth, meas.elevation, problem.models[slot]
+    if ideal_lh1:
+        a0, a1 = ideal_from_measured(a0, a1, model)
+        model = IDEAL
+    twins = planar_twins(a0, a1, board.positions, board.normals, model,
+                         min_sensors=min_sensors)
     chi2 = 2 * twins.n_sensors[:, None] * (twins.rms_rad / fit_sigma_rad) ** 2
     emission = np.where((twins.facing > min_facing) & np.isfinite(chi2), chi2, np.inf)
     valid = np.isfinite(emission).any(axis=1)
