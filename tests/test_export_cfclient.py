@@ -117,6 +117,20 @@ def _hand_held(tmp_path: Path, rest_s: float = 2.0, noise: float = 0.02,
     return imu, save_trajectory(traj, tmp_path / "trajectory.csv"), traj
 
 
+
+def assert_same_system(a: dict, b: dict, system_type: int) -> None:
+    """Two system-config documents ``a`` (the original) and ``b`` agree: keys, system type,
+    geometry (float32 rotations are made orthonormal: 1e-6) and every calibration term."""
+    assert a.keys() == b.keys() and a["systemType"] == b["systemType"] == system_type
+    for k in a["geos"]:
+        for key in ("origin", "rotation"):
+            np.testing.assert_allclose(b["geos"][k][key], a["geos"][k][key], atol=1e-6)
+    for k in a["calibs"]:
+        assert b["calibs"][k]["uid"] == a["calibs"][k]["uid"]
+        for s in (0, 1):
+            for key, value in a["calibs"][k]["sweeps"][s].items():
+                assert b["calibs"][k]["sweeps"][s][key] == pytest.approx(value, abs=1e-12)
+
 def test_file_reads_back_with_cflib(tmp_path):
     cfm = pytest.importorskip("cflib.localization").LighthouseConfigFileManager
     stations, ootx = _write_setup(tmp_path)
@@ -166,16 +180,7 @@ def test_round_trip_of_the_shared_file(tmp_path):
     assert main(["export", "cfclient", str(stations), "--calibration", str(ootx), "--output",
                  str(out), "--up", "none", "--origin", "world", "--x", "world",
                  "--quiet"]) == 0
-    a, b = yaml.safe_load(source.read_text()), yaml.safe_load(out.read_text())
-    assert a.keys() == b.keys() and a["systemType"] == b["systemType"] == 1
-    for k in a["geos"]:
-        for key in ("origin", "rotation"):  # float32 rotations are made orthonormal
-            np.testing.assert_allclose(b["geos"][k][key], a["geos"][k][key], atol=1e-6)
-    for k in a["calibs"]:
-        assert b["calibs"][k]["uid"] == a["calibs"][k]["uid"]
-        for s in (0, 1):
-            for key, value in a["calibs"][k]["sweeps"][s].items():
-                assert b["calibs"][k]["sweeps"][s][key] == pytest.approx(value, abs=1e-12)
+    assert_same_system(yaml.safe_load(source.read_text()), yaml.safe_load(out.read_text()), 1)
 
 
 WORLD_AS_IS = WorldOptions(up="none", origin="world", x="world")
@@ -296,17 +301,11 @@ def test_lh2_shared_log_import_then_export_reproduces_its_file(tmp_path):
                  "--up", "none", "--origin", "world", "--x", "world", "--quiet"]) == 0
     a, b = yaml.safe_load((data / "system-config.yaml").read_text()), yaml.safe_load(
         out.read_text())
-    assert a.keys() == b.keys() and a["systemType"] == b["systemType"] == 2
     assert a["geos"].keys() == b["geos"].keys() and a["calibs"].keys() == b["calibs"].keys()
-    for k in a["geos"]:
-        for key in ("origin", "rotation"):  # float32 rotations are made orthonormal
-            np.testing.assert_allclose(b["geos"][k][key], a["geos"][k][key], atol=1e-6)
     for k in a["calibs"]:
-        assert b["calibs"][k]["uid"] == a["calibs"][k]["uid"]
         for s in (0, 1):
             assert b["calibs"][k]["sweeps"][s].keys() == a["calibs"][k]["sweeps"][s].keys()
-            for key, value in a["calibs"][k]["sweeps"][s].items():
-                assert b["calibs"][k]["sweeps"][s][key] == pytest.approx(value, abs=1e-12)
+    assert_same_system(a, b, 2)
 
 
 def test_still_mask_finds_the_rest():
