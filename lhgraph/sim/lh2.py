@@ -19,7 +19,6 @@ from numpy.typing import NDArray
 
 from lhgraph.io.angles import Angles
 from lhgraph.model.board import Board
-from lhgraph.model.boards import board_by_name
 from lhgraph.model.lh2 import ideal_angles, lh1_equivalent
 from lhgraph.model.station import StationModel
 from lhgraph.sim.config import (
@@ -29,13 +28,12 @@ from lhgraph.sim.config import (
     lh2_rotor_period_s,
 )
 from lhgraph.sim.layout import Scene
-from lhgraph.sim.motion import facing_rotation, make_motion
 from lhgraph.sim.simulate import (
     CLOCK_PPM_RANGE,
     SimulatedCapture,
     _facing,
     _timing_noise,
-    scene_of,
+    setting,
     solve_crossing_times,
     truth_and_imu,
 )
@@ -71,17 +69,9 @@ def simulate_lh2(config: SimulationConfig, seed: int | None = None) -> Simulated
     ``lighthouse`` and ``sweep`` come from one pass of one plane. ``pulses`` and ``slots`` are
     None (no raw signal).
     """
-    rng = np.random.default_rng(config.seed if seed is None else seed)
-    config = config if seed is None else replace(config, seed=seed)
-    board = board_by_name(config.board, config.base_dir)
-    scene = scene_of(config)
+    config, rng, board, scene, motion = setting(config, seed)
     n = len(scene.T_world_lh)
     models = lh2_models(config, n)
-
-    mc = config.motion
-    R_mean = facing_rotation(scene.centre, scene.T_world_lh[:, :3, 3], scene.up)
-    motion = make_motion(mc.pattern, mc.speed_mps, scene.centre, R_mean, mc.amplitude_m,
-                         np.radians(mc.rotation_amplitude_deg), config.duration_s, rng)
     ppm = config.clock_ppm
     ppm = float(rng.uniform(-CLOCK_PPM_RANGE, CLOCK_PPM_RANGE)) if ppm is None else ppm
     periods = np.array([lh2_rotor_period_s(m.channel) for m in models]) * (1 + ppm * 1e-6)

@@ -148,6 +148,22 @@ def schedule(n_stations: int, duration_s: float, fs: float, first_station: int,
     return slots, sync_s
 
 
+def setting(config: SimulationConfig, seed: int | None
+            ) -> tuple[SimulationConfig, np.random.Generator, Board, Scene, Motion]:
+    """What both generations' simulations start from: ``config`` with ``seed`` (overriding
+    ``config.seed``), the random generator, the board, the scene and the board's motion
+    (the motion's draws come first from the generator)."""
+    rng = np.random.default_rng(config.seed if seed is None else seed)
+    config = config if seed is None else replace(config, seed=seed)
+    board = board_by_name(config.board, config.base_dir)
+    scene = scene_of(config)
+    mc = config.motion
+    R_mean = facing_rotation(scene.centre, scene.T_world_lh[:, :3, 3], scene.up)
+    motion = make_motion(mc.pattern, mc.speed_mps, scene.centre, R_mean, mc.amplitude_m,
+                         np.radians(mc.rotation_amplitude_deg), config.duration_s, rng)
+    return config, rng, board, scene, motion
+
+
 def _station_angles(p_lh: NDArray, station: NDArray, axis: NDArray,
                     models: list[StationModel]) -> NDArray:
     """Measured sweep angles of station-frame points, each with its own station's model."""
@@ -218,18 +234,10 @@ def simulate(config: SimulationConfig, seed: int | None = None) -> SimulatedCapt
         from lhgraph.sim.lh2 import simulate_lh2
 
         return simulate_lh2(config, seed)
-    rng = np.random.default_rng(config.seed if seed is None else seed)
-    config = config if seed is None else replace(config, seed=seed)
+    config, rng, board, scene, motion = setting(config, seed)
     fs = config.sample_rate_hz
-    board = board_by_name(config.board, config.base_dir)
-    scene = scene_of(config)
     n = len(scene.T_world_lh)
     models = [config.station_models.get(i, StationModel()) for i in range(n)]
-
-    mc = config.motion
-    R_mean = facing_rotation(scene.centre, scene.T_world_lh[:, :3, 3], scene.up)
-    motion = make_motion(mc.pattern, mc.speed_mps, scene.centre, R_mean, mc.amplitude_m,
-                         np.radians(mc.rotation_amplitude_deg), config.duration_s, rng)
 
     first = int(rng.integers(n)) if config.first_station is None else config.first_station
     phase = int(rng.integers(2 * n))
