@@ -30,6 +30,7 @@ from lhgraph.estimation.graph.variables import (
     SWEEP_OFFSET,
     VariableFamily,
     VariableLayout,
+    chain_dissection,
     initial_values,
 )
 from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
@@ -337,6 +338,55 @@ def test_elimination_ordering_follows_the_families():
                for i in (0, 7, 2**40))
     with pytest.raises(ValueError, match="same state indices"):
         VariableLayout({BOARD_POSE: range(3), BOARD_TWIST: range(2)})
+
+
+def test_chain_dissection_is_a_nested_dissection_of_the_states():
+    assert chain_dissection(10, leaf=2) == [0, 1, 3, 4, 2, 6, 7, 9, 8, 5]
+    for n in (0, 1, 64, 65, 12345):
+        assert sorted(chain_dissection(n)) == list(range(n))
+
+
+def _room_graph(n_states: int, n_stations: int) -> gtsam.SymbolicFactorGraph:
+    """A room's structure: the board goes round once, seeing two neighbouring stations at a
+    time (slots 1..n_stations; the reference is no variable)."""
+    x, w, o, lh = (f.key for f in (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE))
+    graph = gtsam.SymbolicFactorGraph()
+    for k in range(n_states):
+        first = 1 + k * n_stations // n_states
+        for s in (first, first % n_stations + 1):
+            graph.push_factor(x(k), lh(s))
+            graph.push_factor(o(k), x(k), lh(s))
+        graph.push_factor(x(k), w(k))
+        if k:
+            graph.push_factor(x(k - 1), w(k - 1), x(k), w(k))
+    return graph
+
+
+def test_elimination_ordering_keeps_a_rooms_cliques_to_the_stations_in_view():
+    """8 stations round a room, two in view at a time: with the layout's order almost no board
+    state's conditional holds more than 4 stations (time order: most of them do), and with
+    the stations fixed (tracking) the states go in time order."""
+    n = 2000
+    stations = {STATION_POSE.key(s) for s in range(1, 9)}
+    graph = _room_graph(n, 8)
+    x, w, o = (f.key for f in (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET))
+
+    def stations_held(ordering: gtsam.Ordering) -> np.ndarray:
+        net = graph.eliminateSequential(ordering)
+        return np.array([len(set(net.at(i).keys()) & stations) for i in range(net.size())
+                         if gtsam.Symbol(net.at(i).firstFrontalKey()).chr() == ord("x")])
+
+    held = stations_held(VariableLayout.of_problem(n, 9).elimination_ordering())
+    assert len(held) == n
+    assert np.median(held) <= 2 and np.mean(held > 4) < 0.01
+    time_order = gtsam.Ordering()
+    for key in ([o(k) for k in range(n)] + [key for k in range(n) for key in (x(k), w(k))]
+                + sorted(stations)):
+        time_order.push_back(key)
+    assert np.mean(stations_held(time_order) > 4) > 0.5
+    tracking = VariableLayout.of_problem(5, 1, fixed_stations=True).elimination_ordering()
+    assert [tracking.at(i) for i in range(tracking.size())] == (
+        [o(k) for k in range(5)] + [key for k in range(5) for key in (x(k), w(k))])
 
 
 def test_limit_board_steps_scales_only_the_states_beyond_the_trust_region():

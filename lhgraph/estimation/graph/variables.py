@@ -133,10 +133,16 @@ class VariableLayout:
         return self._keys[family]
 
     def elimination_ordering(self) -> gtsam.Ordering:
-        """Leaf families first (the sweep offsets), then the chain families state by state in
-        time order (board pose, twist), the root families last (the stations): the chain
-        eliminates without fill-in, and the stations sit in the root clique, so their marginal
-        covariances come with the last iteration's Bayes tree for free."""
+        """Leaf families first (the sweep offsets), then the chain families state by state
+        (board pose, twist), the root families last (the stations): the stations sit in the
+        root clique, so their marginal covariances come with the last iteration's Bayes tree
+        for free.
+
+        The states go in time order when the graph has no root variables (tracking: the chain
+        eliminates without fill-in), else in the nested-dissection order of the chain
+        (:func:`chain_dissection`): eliminated in time order, every state's clique would hold
+        every station seen before it (all 8 of a room, though each state sees 3 or 4), and the
+        8-station room's elimination took 0.93 s instead of 0.59 s."""
         ordering = gtsam.Ordering()
         by_stage = {stage: [f for f in self._indices if f.elimination == stage]
                     for stage in ("leaf", "chain", "root")}
@@ -144,9 +150,11 @@ class VariableLayout:
             for key in self._keys[family]:
                 ordering.push_back(key)
         chain = [self._keys[f] for f in by_stage["chain"]]
-        for keys in zip(*chain, strict=True):
-            for key in keys:
-                ordering.push_back(key)
+        n_states = len(chain[0]) if chain else 0
+        has_root = any(self._keys[f] for f in by_stage["root"])
+        for state in chain_dissection(n_states) if has_root else range(n_states):
+            for keys in chain:
+                ordering.push_back(keys[state])
         for family in by_stage["root"]:
             for key in self._keys[family]:
                 ordering.push_back(key)
@@ -175,6 +183,25 @@ class VariableLayout:
         """Insert ``data`` (``(n, 4, 4)`` poses or ``(n, dim)`` vectors, in index order)."""
         for key, x in zip(self._keys[family], data, strict=True):
             values.insert(key, gtsam.Pose3(x) if family.is_pose else x)
+
+
+def chain_dissection(n: int, leaf: int = 64) -> list[int]:
+    """Nested-dissection order of a chain of ``n`` states: each half of a segment before the
+    state between them, segments of at most ``leaf`` states in time order. A subtree's cliques
+    hold only the stations seen within its segment (plus its two boundary states), so the
+    elimination cost per state stays that of the few stations in view, not of all of them."""
+    order: list[int] = []
+    stack: list[tuple[int, int, bool]] = [(0, n, False)]
+    while stack:  # iterative post-order: left half, right half, middle state
+        lo, hi, expanded = stack.pop()
+        if hi - lo <= leaf:
+            order.extend(range(lo, hi))
+        elif expanded:
+            order.append((lo + hi) // 2)
+        else:
+            mid = (lo + hi) // 2
+            stack += [(lo, hi, True), (mid + 1, hi, False), (lo, mid, False)]
+    return order
 
 
 def initial_values(layout: VariableLayout, init: Initialisation,
