@@ -142,8 +142,11 @@ class FewDiodeInitialiser:
 
     def _twins(self, board: Board, angles: Angles, problem: GraphProblem) -> list[TwinPath]:
         S = len(problem.station_ids)
-        # the stations in parallel threads (numpy releases the GIL in its array loops)
-        return in_threads(partial(twin_path, board, angles, problem), S)
+        # LH2: the twins from the ideal LH1-equivalent angles (twin_path's ideal_lh1; from
+        # the plane angles they converge far from the board off the optical axis); the
+        # stations in parallel threads (numpy releases the GIL in its array loops)
+        lh2 = any(m.generation == 2 for m in problem.models)
+        return in_threads(partial(twin_path, board, angles, problem, ideal_lh1=lh2), S)
 
     def _agreeing_paths(self, twins: list[TwinPath], T_world_lh: Array
                         ) -> list[tuple[Array, Array, Array]]:
