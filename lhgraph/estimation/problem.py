@@ -26,6 +26,8 @@ class GraphProblem:
     hits: BearingHits
     hit_rows: NDArray[np.int64]       # (N,) row of each sorted hit in the input table
     bounds: NDArray[np.int64]         # (K + 1,) hit slice of state k = bounds[k]:bounds[k+1]
+    hit_sensor: NDArray[np.int64]     # (N,) board row of each sorted hit's sensor
+    n_sensors: int                    # the board's sensor count
 
     @property
     def n_states(self) -> int:
@@ -65,4 +67,5 @@ def build_problem(board: Board, angles: Angles, models: dict[int, StationModel],
     bounds = np.searchsorted(state, np.arange(n_sweeps + 1))
     state_station = station_slot[bounds[:-1]]
     return GraphProblem(station_ids, [models.get(s, StationModel()) for s in station_ids],
-                        state_time, state_station, hits, rows, bounds)
+                        state_time, state_station, hits, rows, bounds,
+                        sensor_rows[rows], len(board.positions))

@@ -56,3 +56,6 @@ class SolveResult:
     each optimiser iteration; empty for methods without such a loop."""
     gravity_world: NDArray[np.float64] | None = None
     """With an IMU: the gravity vector (m/s^2, pointing down) in the result's world."""
+    diode_bias_rad: dict[int, NDArray[np.float64]] | None = None
+    """With the graph's diode biases (``diode_bias_sigma_rad``): per station index, the
+    ``(2, n_sensors)`` angle bias (rad) of each axis and board row."""

@@ -101,6 +101,11 @@ class FactorEvaluator:
         self.gyro_sigma = options.gyro_sigma_rad_s
         self.accel_sigma = options.accel_sigma_mps2
         self._imu = np.zeros(9)  # IMU bias (gyro, accelerometer), gravity
+        self._bias = next((f for f in layout.families if f.name == "diode bias"), None)
+        self._bias_sigma = options.diode_bias_sigma_rad
+        dim = 0 if self._bias is None else self._bias.dim
+        self._B = np.zeros((S, dim))
+        self._bias_column = problem.hits.axis * problem.n_sensors + problem.hit_sensor
 
     # --- noise levels --------------------------------------------------------------------
 
@@ -146,8 +151,9 @@ class FactorEvaluator:
         self.evaluate(values)
         bearing = self.loss.cost(self._r_whitened / self._sigma0)
         offsets = 0.5 * (self._O / self._offset_sigma) ** 2
-        return float(bearing.sum() + offsets.sum() + 0.5 * self._motion_chi2().sum()
-                     + self._inertial_cost())
+        biases = 0.5 * (self._B / self._bias_sigma) ** 2 if self._bias is not None else 0.0
+        return float(bearing.sum() + offsets.sum() + np.sum(biases)
+                     + 0.5 * self._motion_chi2().sum() + self._inertial_cost())
 
     def bearing_residuals(self) -> Array:
         """Per-hit angle residual, predicted (+ sweep offset) - measured (rad), in the
@@ -161,6 +167,11 @@ class FactorEvaluator:
     def robust_weights(self) -> Array:
         """Per-hit robust weight in [0, 1] at the current diode noise."""
         return self.loss.weights(self._r, self.angle_sigma())
+
+    def diode_biases(self) -> Array:
+        """Every station slot's diode-bias vector ``(S, 2 * n_sensors)`` (rad, axis-major;
+        ``(S, 0)`` when the graph has none)."""
+        return _read_only(self._B)
 
     def station_poses(self) -> Array:
         """``T_world_lh`` of every station slot ``(S, 4, 4)`` (fixed ones as given)."""
@@ -191,6 +202,8 @@ class FactorEvaluator:
                 H[2] = self._offset_jacobian[a:b]
                 if station_var is not None:
                     H[3] = self._HL[a:b]
+                if self._bias is not None:
+                    H[-1] = self._bias_jacobian(a, b)
             return self._r_whitened[a:b]
 
         return error
@@ -263,6 +276,12 @@ class FactorEvaluator:
 
         return error
 
+    def _bias_jacobian(self, a: int, b: int) -> Array:
+        """Jacobian of hits ``a:b`` with respect to their station's diode-bias vector."""
+        H = np.zeros((b - a, self._bias.dim))
+        H[np.arange(b - a), self._bias_column[a:b]] = self._bearing_scale
+        return H
+
     def _inertial_cost(self) -> float:
         if self.inertial is None:
             return 0.0
@@ -291,6 +310,10 @@ class FactorEvaluator:
         h = p.hits
         self._r = bearing_residuals(h, self._X, self._W, self._L, p.models, False)[0]
         self._r += self._O[h.state]
+        if self._bias is not None:
+            self._B[self.layout.indices(self._bias)] = self.layout.read_vectors(values,
+                                                                                self._bias)
+            self._r += self._B[h.station, self._bias_column]
         self._e_raw = motion_residuals(self._X[:-1], self._W[:-1], self._X[1:], self._W[1:],
                                        self._dt, False)[0]
         if self.inertial is not None:
@@ -335,6 +358,8 @@ class FactorEvaluator:
                 and values.atVector(SWEEP_OFFSET.key(k))[0] == self._O[k]
                 and (slot is None or np.array_equal(
                     values.atPose3(STATION_POSE.key(slot)).matrix(), self._L[slot]))
+                and (self._bias is None or np.array_equal(
+                    self.layout.read_vectors(values, self._bias), self._B))
                 and (self.inertial is None or (
                     np.array_equal(values.atVector(IMU_BIAS.key(0)), self._imu[:6])
                     and np.array_equal(values.atVector(GRAVITY.key(0)), self._imu[6:])))):

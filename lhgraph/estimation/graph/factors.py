@@ -6,7 +6,9 @@
    hit in that sweep, residual = predicted angle of the full station model + sweep offset -
    measured, isotropic diode noise wrapped in the per-diode robust loss
    (:mod:`lhgraph.estimation.graph.loss`);
-2. **sweep-offset prior** on every offset (GTSAM's ``PriorFactorVector``, zero mean);
+2. **sweep-offset prior** on every offset (GTSAM's ``PriorFactorVector``, zero mean), and
+   with ``diode_bias_sigma_rad`` a zero-mean prior on every station's diode-bias vector (then
+   a key of each of its bearing factors);
 3. **motion prior** (white noise on acceleration) between consecutive states, keys
    :func:`motion_keys`;
 4. with an IMU stream (:mod:`lhgraph.estimation.inertial`): a **gyro factor** on every
@@ -36,6 +38,7 @@ from lhgraph.estimation.graph.variables import (
     STATION_POSE,
     SWEEP_OFFSET,
     VariableLayout,
+    diode_bias_family,
 )
 from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, InertialData
 from lhgraph.estimation.problem import GraphProblem
@@ -43,11 +46,14 @@ from lhgraph.estimation.problem import GraphProblem
 Array = NDArray[np.float64]
 
 
-def bearing_keys(k: int, station_var: int | None) -> list[int]:
+def bearing_keys(k: int, station_var: int | None, bias_key: int | None = None) -> list[int]:
     """Keys of sweep k's bearing factor; ``station_var``: the slot of the sweeping station
-    when its pose is a variable, None when it is held fixed (the reference)."""
+    when its pose is a variable, None when it is held fixed (the reference); ``bias_key``:
+    the sweeping station's diode-bias vector, when the graph has them."""
     keys = [BOARD_POSE.key(k), BOARD_TWIST.key(k), SWEEP_OFFSET.key(k)]
-    return keys if station_var is None else keys + [STATION_POSE.key(station_var)]
+    if station_var is not None:
+        keys.append(STATION_POSE.key(station_var))
+    return keys if bias_key is None else keys + [bias_key]
 
 
 def motion_keys(k: int) -> list[int]:
@@ -81,12 +87,12 @@ class FactorBuilder:
         self._offset_noise = gtsam.noiseModel.Isotropic.Sigma(1, sweep_offset_sigma_rad)
 
     def bearing(self, k: int, station_var: int | None, n_hits: int, angle_sigma_rad: float,
-                error: FactorError) -> gtsam.CustomFactor:
+                error: FactorError, bias_key: int | None = None) -> gtsam.CustomFactor:
         """Sweep k's bearing factor: ``n_hits`` diodes of noise ``angle_sigma_rad``, robust;
-        ``station_var`` as in :func:`bearing_keys`."""
+        ``station_var`` and ``bias_key`` as in :func:`bearing_keys`."""
         noise = gtsam.noiseModel.Robust.Create(
             self._estimator, gtsam.noiseModel.Isotropic.Sigma(n_hits, angle_sigma_rad))
-        return gtsam.CustomFactor(noise, bearing_keys(k, station_var), error)
+        return gtsam.CustomFactor(noise, bearing_keys(k, station_var, bias_key), error)
 
     def offset_prior(self, k: int) -> gtsam.PriorFactorVector:
         """The zero-mean prior on sweep k's offset."""
@@ -106,9 +112,11 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
     callbacks slice. ``T_world_lh`` ``(S, 4, 4)`` by station slot holds every station fixed
     at that pose (tracking); without it the stations but the reference are variables."""
     loss = RobustLoss(options.loss, options.huber_k)
+    bias = (diode_bias_family(problem.n_sensors) if options.diode_bias_sigma_rad > 0
+            else None)
     layout = VariableLayout.of_problem(problem.n_states, len(problem.station_ids),
                                        fixed_stations=T_world_lh is not None,
-                                       inertial=inertial is not None)
+                                       inertial=inertial is not None, diode_bias=bias)
     ev = FactorEvaluator(problem, layout, loss, options, T_world_lh, inertial)
     build = FactorBuilder(loss, options.sweep_offset_sigma_rad)
     graph = gtsam.NonlinearFactorGraph()
@@ -116,9 +124,14 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
         n = int(problem.bounds[k + 1] - problem.bounds[k])
         slot = int(problem.state_station[k])
         var = slot if layout.holds(STATION_POSE, slot) else None
-        graph.add(build.bearing(k, var, n, options.angle_sigma_rad, ev.bearing_error(k, slot)))
+        graph.add(build.bearing(k, var, n, options.angle_sigma_rad, ev.bearing_error(k, slot),
+                                None if bias is None else bias.key(slot)))
     for k in range(problem.n_states):
         graph.add(build.offset_prior(k))
+    if bias is not None:
+        bias_noise = gtsam.noiseModel.Isotropic.Sigma(bias.dim, options.diode_bias_sigma_rad)
+        for slot in layout.indices(bias):
+            graph.add(gtsam.PriorFactorVector(bias.key(slot), np.zeros(bias.dim), bias_noise))
     for k in range(problem.n_states - 1):
         graph.add(build.motion(k, ev.motion_covariances[k], ev.motion_error(k)))
     if inertial is not None:

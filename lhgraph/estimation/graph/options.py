@@ -59,7 +59,11 @@ class GraphOptions:
     factors (a gyro reading at a state's time; an accelerometer reading over a step, which
     also carries the vibration and the lever arm the model leaves out), used when an IMU
     stream is given (:mod:`lhgraph.estimation.inertial`), whose samples count within
-    ``imu_max_gap_s`` of a state. Each field's
+    ``imu_max_gap_s`` of a state; ``diode_bias_sigma_rad``: when positive, every station
+    sees every diode on each axis with a constant angle bias of this prior spread (variables
+    of the graph, :func:`~lhgraph.estimation.graph.variables.diode_bias_family`: the board's
+    geometry errors and the diodes' own delays, which repeat from sweep to sweep); 0: none.
+    Each field's
     allowed range is declared next to it; a value outside it raises
     :class:`~lhgraph.errors.InputError` naming the field.
     """
@@ -93,6 +97,7 @@ class GraphOptions:
     gyro_sigma_rad_s: float = option(0.02, gt=0)
     accel_sigma_mps2: float = option(0.5, gt=0)
     imu_max_gap_s: float = option(0.05, gt=0)
+    diode_bias_sigma_rad: float = option(0.0, ge=0)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -226,4 +226,7 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
                      "motion_chi2_per_dof": ev.motion_chi2_per_dof(),
                      "angle_sigma_rad": ev.angle_sigma()} | ev.inertial_summary(),
         gravity_world=ev.gravity(),
+        diode_bias_rad=({sid: b.reshape(2, -1).copy()
+                         for sid, b in zip(problem.station_ids, ev.diode_biases(), strict=True)}
+                        if options.diode_bias_sigma_rad > 0 else None),
     )

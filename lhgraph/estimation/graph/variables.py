@@ -78,6 +78,15 @@ IMU_BIAS = VariableFamily("IMU bias", "i", 6, False, "root", 1.0,
                           "gyro (rad/s) and accelerometer (m/s^2) bias, board frame")
 GRAVITY = VariableFamily("gravity", "n", 3, False, "root", 1.0,
                          "gravity vector (m/s^2) in the world")
+
+
+def diode_bias_family(n_sensors: int) -> VariableFamily:
+    """The per-diode angle biases of a board of ``n_sensors``: one vector per station slot,
+    ``2 * n_sensors`` long (axis-major: ``axis * n_sensors + board row``), in rad."""
+    return VariableFamily("diode bias", "d", 2 * n_sensors, False, "root", 1.0,
+                          "angle bias (rad) of each diode and axis as station slot s sees it")
+
+
 FAMILIES = (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE, IMU_BIAS, GRAVITY)
 """Every family the graph and the streaming smoother know."""
 
@@ -106,15 +115,19 @@ class VariableLayout:
 
     @classmethod
     def of_problem(cls, n_states: int, n_stations: int, fixed_stations: bool = False,
-                   inertial: bool = False) -> VariableLayout:
+                   inertial: bool = False, diode_bias: VariableFamily | None = None
+                   ) -> VariableLayout:
         """The batch graph's layout: every family per board state ``0..n_states-1``, a station
         pose for slots ``1..n_stations-1`` (none with ``fixed_stations``: tracking, every
         station held at a known pose), and with ``inertial`` one IMU bias and the gravity."""
         states = range(n_states)
         stations = range(0) if fixed_stations else range(1, n_stations)
         imu = range(1) if inertial else range(0)
-        return cls({BOARD_POSE: states, BOARD_TWIST: states, SWEEP_OFFSET: states,
-                    STATION_POSE: stations, IMU_BIAS: imu, GRAVITY: imu})
+        families = {BOARD_POSE: states, BOARD_TWIST: states, SWEEP_OFFSET: states,
+                    STATION_POSE: stations, IMU_BIAS: imu, GRAVITY: imu}
+        if diode_bias is not None:
+            families[diode_bias] = range(n_stations)
+        return cls(families)
 
     @property
     def families(self) -> tuple[VariableFamily, ...]:
@@ -218,4 +231,7 @@ def initial_values(layout: VariableLayout, init: Initialisation,
             raise ValueError("a layout with IMU variables needs the initial gravity")
         layout.insert(values, IMU_BIAS, np.zeros((1, 6)))
         layout.insert(values, GRAVITY, np.asarray(gravity, dtype=float)[None])
+    for family in layout.families:
+        if family.name == "diode bias":
+            layout.insert(values, family, np.zeros((len(layout.indices(family)), family.dim)))
     return values
