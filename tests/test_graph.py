@@ -228,7 +228,8 @@ def test_diode_biases_are_estimated_with_the_stations():
     hive recording's per-diode mean residuals): ignored, they move station 1 by millimetres;
     as graph variables (``diode_bias_sigma_rad``) they are recovered (up to the part a
     station's rotation takes, their mean per station and axis) and the station is found
-    again; the numpy cost stays the graph's error with the biases in it."""
+    again; the numpy cost stays the graph's error with the biases (and the sensor offsets)
+    in it."""
     sim = _capture("default", duration_s=4.0)
     rng = np.random.default_rng(7)
     n = len(sim.board.positions)
@@ -249,14 +250,17 @@ def test_diode_biases_are_estimated_with_the_stations():
         for axis in (0, 1):
             a, b = found[axis, seen], bias[s, axis, seen]
             assert np.corrcoef(a - a.mean(), b - b.mean())[0, 1] > 0.9
-    options = GraphOptions(diode_bias_sigma_rad=1e-4)
+    # the numpy cost is the graph's error with diode biases and sensor offsets in it
+    options = GraphOptions(diode_bias_sigma_rad=1e-4, sensor_offset_sigma_m=3e-4)
     problem = build_problem(sim.board, angles, {}, 0)
     graph, ev = build_graph(problem, options)
     values = initial_values(ev.layout, PnPKabschInitialiser()(sim.board, angles, problem))
-    family = next(f for f in ev.layout.families if f.name == "diode bias")
-    for slot in ev.layout.indices(family):
-        values.update(family.key(slot), rng.normal(0.0, 1e-4, family.dim))
+    for family in ev.layout.families:
+        if family.name in ("diode bias", "sensor offset"):
+            for i in ev.layout.indices(family):
+                values.update(family.key(i), rng.normal(0.0, 1e-4, family.dim))
     assert ev.cost(values) == pytest.approx(graph.error(values), rel=1e-12)
+    assert np.abs(ev.sensor_offsets()).max() > 0
 
 
 @pytest.mark.parametrize("kind", ["cauchy", "huber"])

@@ -185,3 +185,22 @@ def test_interrupted_run_resumes(capture_dir: Path, tmp_path: Path,
     assert main(["solve", str(config), "--output", str(tmp_path / "s.toml"), "--resume",
                  "--method", "graph", "--quiet"]) == 2
     assert "--resume is for a run directory" in capsys.readouterr().err
+
+
+def test_run_directory_holds_the_solved_board(capture_dir: Path, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture) -> None:
+    """With the graph's sensor offsets on, the run directory also holds board.toml (the
+    board with the solved sensor positions: the simulated board is exact, so they move by
+    well under a millimetre); ``board_output`` is refused for a run directory."""
+    from lhgraph.model.board import load_board
+
+    config = write_config(capture_dir, GRAPH_CONFIG + "[graph]\nsensor_offset_sigma_m = 3e-4\n",
+                          "offsets.toml")
+    out = tmp_path / "run"
+    assert main(["solve", str(config), "--output", str(out), "--quiet"]) == 0
+    moved = load_board(out / "board.toml").positions - load_board(capture_dir / "board.toml"
+                                                                  ).positions
+    assert 0 < np.abs(moved).max() < 1e-3
+    config = write_config(capture_dir, GRAPH_CONFIG + 'board_output = "b.toml"\n', "bo.toml")
+    assert main(["solve", str(config), "--output", str(tmp_path / "x"), "--quiet"]) == 2
+    assert "board_output" in capsys.readouterr().err and not (tmp_path / "x").exists()

@@ -60,6 +60,9 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    "without .toml or an existing directory = a run directory, docs/workflow.md)")
     p.add_argument("--method", choices=METHODS, help="default: graph")
     p.add_argument("--trajectory", help="also write the board trajectory CSV")
+    p.add_argument("--board-output", metavar="BOARD.toml",
+                   help="also solve for the board's sensor positions (graph method) and write "
+                   "the board with them (docs/solve.md)")
     p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
     p.add_argument("--truth", help="true stations TOML: print the errors")
     p.add_argument("--reference", type=int, help="station index of the world frame")
@@ -93,6 +96,7 @@ def run_solve(args: argparse.Namespace) -> int:
              for name in ("output", "method", "trajectory", "calibration", "truth", "reference",
                           "world", "imu")}
     flags["--duration"] = ("duration_s", args.duration)
+    flags["--board-output"] = ("board_output", args.board_output)
     if args.config:
         config = load_solve_config(args.config)
     else:

@@ -59,3 +59,6 @@ class SolveResult:
     diode_bias_rad: dict[int, NDArray[np.float64]] | None = None
     """With the graph's diode biases (``diode_bias_sigma_rad``): per station index, the
     ``(2, n_sensors)`` angle bias (rad) of each axis and board row."""
+    sensor_offset_m: NDArray[np.float64] | None = None
+    """With the graph's sensor offsets (``sensor_offset_sigma_m``): the correction ``(n_sensors,
+    3)`` (m, board frame) of every sensor position of the board file, by board row."""

@@ -52,6 +52,14 @@ def make_board(positions: ArrayLike, normals: ArrayLike, ids: ArrayLike | None =
     return Board(ids.astype(np.int64), positions, normals, name)
 
 
+def with_sensor_offsets(board: Board, offsets_m: ArrayLike) -> Board:
+    """``board`` with every sensor moved by ``offsets_m`` (N, 3) (m, board frame, by board
+    row; e.g. what a graph solve with sensor offsets found); normals and ids kept."""
+    offsets_m = np.asarray(offsets_m, dtype=float).reshape(board.positions.shape)
+    return Board(board.ids.copy(), board.positions + offsets_m, board.normals.copy(),
+                 board.name)
+
+
 def load_board(path: str | Path) -> Board:
     """Read a board TOML (``[[sensors]]`` with ``id``, ``position``, ``normal``)."""
     data = read_toml(path)

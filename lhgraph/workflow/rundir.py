@@ -32,6 +32,7 @@ from lhgraph.geometry.transforms import euler_zyx, matrix_to_quat
 from lhgraph.io.files import check_writable, write_atomic, write_csv_columns
 from lhgraph.io.stations import Stations, load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
+from lhgraph.model.board import save_board, with_sensor_offsets
 from lhgraph.report.assessment import coverage, view_points
 from lhgraph.workflow.inputs import SolveInputs, check_inputs, load_inputs
 from lhgraph.workflow.solve import solve
@@ -265,12 +266,14 @@ def save_residuals(res: Residuals, path: str | Path, overwrite: bool = False) ->
          "residual_rad": "{:.6e}", "weight": "{:.4f}"}, overwrite)
 
 
-def planned_files(output: Path, methods: list[str]) -> list[Path]:
-    """Every file a run directory for ``methods`` will hold."""
-    if len(methods) == 1:
-        return [output / name for name in RUN_FILES]
-    return ([output / m / name for m in methods for name in RUN_FILES]
-            + [output / name for name in COMPARISON_FILES])
+def planned_files(output: Path, methods: list[str], board: bool = False) -> list[Path]:
+    """Every file a run directory for ``methods`` will hold (with ``board``, the graph's
+    ``board.toml``: its solved sensor positions)."""
+    folders = {m: output if len(methods) == 1 else output / m for m in methods}
+    files = [folders[m] / name for m in methods for name in RUN_FILES]
+    if board and "graph" in folders:
+        files.append(folders["graph"] / "board.toml")
+    return files + ([output / name for name in COMPARISON_FILES] if len(methods) > 1 else [])
 
 
 def _write_json(path: Path, data: dict[str, Any], overwrite: bool) -> Path:
@@ -296,9 +299,13 @@ def run_to_directory(config: SolveConfig, output: str | Path, overwrite: bool = 
     if config.trajectory is not None:
         raise InputError("'trajectory' is for a stations-TOML output; a run directory always "
                          "holds trajectory.csv", config.path, "trajectory")
+    if config.board_output is not None:
+        raise InputError("'board_output' is for a stations-TOML output; a run directory holds "
+                         "board.toml when graph.sensor_offset_sigma_m is set",
+                         config.path, "board_output")
     methods = config.method_list()
     check_inputs(config)
-    for target in planned_files(output, methods):
+    for target in planned_files(output, methods, config.graph.sensor_offset_sigma_m > 0):
         if target.exists() and not target.is_dir() and not (overwrite or resume):
             raise InputError("exists already (--resume keeps the methods that finished and "
                              "computes the rest; --force recomputes everything)", target)
@@ -350,13 +357,16 @@ def _run_method(config: SolveConfig, inputs: SolveInputs, method: str, folder: P
     finished); the paths written are appended to ``files``."""
     say(f"[{method}] solving")
     result = solve(inputs.board, inputs.angles, method, inputs.models, config.reference,
-                   config.graph, lambda msg: say(f"[{method}] {msg}"),
+                   config.graph_options(), lambda msg: say(f"[{method}] {msg}"),
                    world_up=inputs.world_up, imu=inputs.imu)
     errors = station_errors(truth, result.stations) if truth is not None else None
     summary = summarise(config, inputs, result, errors, hashes, load_s)
     files.append(save_stations(result.stations, folder / "stations.toml", overwrite))
     if result.trajectory is not None:
         files.append(save_trajectory(result.trajectory, folder / "trajectory.csv", overwrite))
+    if result.sensor_offset_m is not None:
+        files.append(save_board(with_sensor_offsets(inputs.board, result.sensor_offset_m),
+                                folder / "board.toml", overwrite))
     if result.residuals is not None:
         files.append(save_residuals(result.residuals, folder / "residuals.csv", overwrite))
     say(f"[{method}] writing the report")

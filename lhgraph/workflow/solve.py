@@ -29,7 +29,7 @@ from lhgraph.io.files import check_writable
 from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
-from lhgraph.model.board import Board
+from lhgraph.model.board import Board, load_board, save_board, with_sensor_offsets
 from lhgraph.model.station import StationModel
 from lhgraph.workflow.inputs import check_inputs, load_inputs
 from lhgraph.workflow.solve_config import SolveConfig
@@ -108,8 +108,8 @@ def run_config(config: SolveConfig, progress: Callable[[str], None] | None = Non
     """Load the inputs a config names and solve with its (first) method."""
     inputs = load_inputs(config)
     return solve(inputs.board, inputs.angles, config.method_list()[0], inputs.models,
-                 config.reference, config.graph, progress, world_up=inputs.world_up,
-                 imu=inputs.imu)
+                 config.reference, config.graph_options(), progress,
+                 world_up=inputs.world_up, imu=inputs.imu)
 
 
 def solve_to_files(config: SolveConfig, overwrite: bool = False,
@@ -125,12 +125,18 @@ def solve_to_files(config: SolveConfig, overwrite: bool = False,
     if len(config.method_list()) > 1:
         raise InputError("several methods need a run directory output (a path without "
                          ".toml)", config.output)
+    if config.board_output is not None and config.method_list()[0] != "graph":
+        raise InputError("the sensor positions are solved by the graph method only",
+                         config.path, "board_output")
     check_inputs(config)
-    for target in (config.output, config.trajectory):
+    for target in (config.output, config.trajectory, config.board_output):
         if target is not None:
             check_writable(target, overwrite, create_parents=False)
     truth = load_stations(config.truth) if config.truth else None
     result = run_config(config, progress)
     written = write_solution(result, config.output, config.trajectory, overwrite)
+    if config.board_output is not None:
+        board = with_sensor_offsets(load_board(config.board), result.sensor_offset_m)
+        written.append(save_board(board, config.board_output, overwrite))
     errors = station_errors(truth, result.stations) if truth else None
     return result, errors, written

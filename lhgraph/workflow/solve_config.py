@@ -7,7 +7,7 @@ replace fields with :func:`lhgraph.config.override`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from lhgraph.choices import METHODS, WORLDS
@@ -15,6 +15,10 @@ from lhgraph.config import Table, check_fields, option, rules
 from lhgraph.errors import InputError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.io.files import read_toml
+
+SENSOR_OFFSET_SIGMA_M = 3e-4
+"""Prior spread (m) of each sensor-position correction when a ``board_output`` is asked for
+and the config does not set ``graph.sensor_offset_sigma_m``: a board's assembly tolerance."""
 
 
 @dataclass(frozen=True)
@@ -29,7 +33,9 @@ class SolveConfig:
     moving; ``world`` is ``"reference"`` (the reference station's frame) or ``"gravity"``
     (z up from the stations' OOTX accelerometer vectors, :mod:`lhgraph.estimation.gravity`);
     ``imu`` the receiver's ``imu.csv`` (board frame, the angles' clock): the graph refines its
-    solution with IMU factors (:func:`lhgraph.estimation.graph.solver.solve_graph`).
+    solution with IMU factors (:func:`lhgraph.estimation.graph.solver.solve_graph`);
+    ``board_output`` a board TOML to write with the sensor positions the graph solved for
+    (:meth:`graph_options`: the sensor offsets are then on).
     """
 
     board: Path = option(kind=Path)
@@ -48,9 +54,18 @@ class SolveConfig:
     duration_s: float | None = option(None, kind=float, gt=0, alias="duration")
     world: str = option("reference", choices=WORLDS)
     imu: Path | None = option(None, kind=Path)
+    board_output: Path | None = option(None, kind=Path)
 
     def __post_init__(self) -> None:
         check_fields(self)
+
+    def graph_options(self) -> GraphOptions:
+        """The graph's options: ``graph``, with the sensor offsets on
+        (``SENSOR_OFFSET_SIGMA_M``) when a ``board_output`` is asked for and ``graph`` does not
+        set their prior."""
+        if self.board_output is None or self.graph.sensor_offset_sigma_m > 0:
+            return self.graph
+        return replace(self.graph, sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M)
 
     def method_list(self) -> list[str]:
         """The methods to run, in order."""

@@ -11,6 +11,7 @@ variance-component adaptation (:mod:`lhgraph.estimation.graph.noise`) rescales.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import gtsam
 import numpy as np
@@ -39,6 +40,9 @@ from lhgraph.estimation.residuals import (
 from lhgraph.io.imu import STANDARD_GRAVITY_MPS2
 
 Array = NDArray[np.float64]
+SCALE_SIGMA_M2 = 1e-6
+"""Spread of the sensor offsets' scale mode (sum over sensors of offset . position about the
+board's centroid, m^2): held at zero, the board keeps the board file's size."""
 FactorError = Callable[[gtsam.CustomFactor, gtsam.Values, list | None], Array]
 """A ``gtsam.CustomFactor`` callback: ``(factor, values, jacobians or None) -> residual``."""
 
@@ -106,6 +110,15 @@ class FactorEvaluator:
         dim = 0 if self._bias is None else self._bias.dim
         self._B = np.zeros((S, dim))
         self._bias_column = problem.hits.axis * problem.n_sensors + problem.hit_sensor
+        self._sensors = next((f for f in layout.families if f.name == "sensor offset"), None)
+        self._sensor_sigma = options.sensor_offset_sigma_m
+        self._P = np.zeros((problem.n_sensors, 3))
+        self._hits = problem.hits
+        seen = np.zeros((problem.n_sensors, 3))
+        seen[problem.hit_sensor] = problem.hits.s_board
+        hit = np.zeros(problem.n_sensors, dtype=bool)
+        hit[problem.hit_sensor] = True
+        self._scale_row = np.where(hit[:, None], seen - seen[hit].mean(axis=0), 0.0).ravel()
 
     # --- noise levels --------------------------------------------------------------------
 
@@ -152,6 +165,9 @@ class FactorEvaluator:
         bearing = self.loss.cost(self._r_whitened / self._sigma0)
         offsets = 0.5 * (self._O / self._offset_sigma) ** 2
         biases = 0.5 * (self._B / self._bias_sigma) ** 2 if self._bias is not None else 0.0
+        if self._sensors is not None:
+            biases = np.sum(biases) + 0.5 * np.sum((self._P / self._sensor_sigma) ** 2) + 0.5 * (
+                self._scale_row @ self._P.ravel() / SCALE_SIGMA_M2) ** 2
         return float(bearing.sum() + offsets.sum() + np.sum(biases)
                      + 0.5 * self._motion_chi2().sum() + self._inertial_cost())
 
@@ -202,8 +218,12 @@ class FactorEvaluator:
                 H[2] = self._offset_jacobian[a:b]
                 if station_var is not None:
                     H[3] = self._HL[a:b]
+                j = 4 if station_var is not None else 3
                 if self._bias is not None:
-                    H[-1] = self._bias_jacobian(a, b)
+                    H[j] = self._bias_jacobian(a, b)
+                    j += 1
+                if self._sensors is not None:
+                    H[j] = self._offset_jacobian_rows(a, b)
             return self._r_whitened[a:b]
 
         return error
@@ -276,6 +296,31 @@ class FactorEvaluator:
 
         return error
 
+    def scale_error(self) -> FactorError:
+        """Callback of the factor holding the sensor offsets' scale mode at zero."""
+        def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
+            p = values.atVector(self._sensors.key(0))
+            if H is not None:
+                H[0] = self._scale_row[None]
+            return np.array([self._scale_row @ p])
+
+        return error
+
+    def sensor_offsets(self) -> Array:
+        """The sensor-position corrections ``(n_sensors, 3)`` (m, board frame; zeros when the
+        graph has none)."""
+        return _read_only(self._P)
+
+    def _offset_jacobian_rows(self, a: int, b: int) -> Array:
+        """Jacobian of hits ``a:b`` with respect to the sensor offsets: the board pose's
+        translation columns (a sensor moved in the board frame moves like the board)."""
+        H = np.zeros((b - a, self._sensors.dim))
+        cols = 3 * self.problem.hit_sensor[a:b]
+        rows = np.arange(b - a)
+        for j in range(3):
+            H[rows, cols + j] = self._HX[a:b, 3 + j]
+        return H
+
     def _bias_jacobian(self, a: int, b: int) -> Array:
         """Jacobian of hits ``a:b`` with respect to their station's diode-bias vector."""
         H = np.zeros((b - a, self._bias.dim))
@@ -307,7 +352,10 @@ class FactorEvaluator:
         self._W = self.layout.read_vectors(values, BOARD_TWIST)
         self._O = self.layout.read_vectors(values, SWEEP_OFFSET)[:, 0]
         p = self.problem
-        h = p.hits
+        if self._sensors is not None:
+            self._P = self.layout.read_vectors(values, self._sensors)[0].reshape(-1, 3)
+            self._hits = replace(p.hits, s_board=p.hits.s_board + self._P[p.hit_sensor])
+        h = self._hits
         self._r = bearing_residuals(h, self._X, self._W, self._L, p.models, False)[0]
         self._r += self._O[h.state]
         if self._bias is not None:
@@ -329,7 +377,7 @@ class FactorEvaluator:
         (error-only evaluations never need them)."""
         if self._jacobians_ready:
             return
-        _, HX, HW, HL = bearing_residuals(self.problem.hits, self._X, self._W, self._L,
+        _, HX, HW, HL = bearing_residuals(self._hits, self._X, self._W, self._L,
                                           self.problem.models)
         self._HX, self._HW, self._HL = (H * self._bearing_scale for H in (HX, HW, HL))
         self._offset_jacobian = self._ones * self._bearing_scale
@@ -358,6 +406,8 @@ class FactorEvaluator:
                 and values.atVector(SWEEP_OFFSET.key(k))[0] == self._O[k]
                 and (slot is None or np.array_equal(
                     values.atPose3(STATION_POSE.key(slot)).matrix(), self._L[slot]))
+                and (self._sensors is None or np.array_equal(
+                    values.atVector(self._sensors.key(0)), self._P.ravel()))
                 and (self._bias is None or np.array_equal(
                     self.layout.read_vectors(values, self._bias), self._B))
                 and (self.inertial is None or (

@@ -27,7 +27,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.estimation.graph.evaluator import FactorError, FactorEvaluator
+from lhgraph.estimation.graph.evaluator import SCALE_SIGMA_M2, FactorError, FactorEvaluator
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import (
@@ -39,6 +39,7 @@ from lhgraph.estimation.graph.variables import (
     SWEEP_OFFSET,
     VariableLayout,
     diode_bias_family,
+    sensor_offset_family,
 )
 from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, InertialData
 from lhgraph.estimation.problem import GraphProblem
@@ -46,14 +47,17 @@ from lhgraph.estimation.problem import GraphProblem
 Array = NDArray[np.float64]
 
 
-def bearing_keys(k: int, station_var: int | None, bias_key: int | None = None) -> list[int]:
+def bearing_keys(k: int, station_var: int | None, bias_key: int | None = None,
+                 offset_key: int | None = None) -> list[int]:
     """Keys of sweep k's bearing factor; ``station_var``: the slot of the sweeping station
     when its pose is a variable, None when it is held fixed (the reference); ``bias_key``:
     the sweeping station's diode-bias vector, when the graph has them."""
     keys = [BOARD_POSE.key(k), BOARD_TWIST.key(k), SWEEP_OFFSET.key(k)]
     if station_var is not None:
         keys.append(STATION_POSE.key(station_var))
-    return keys if bias_key is None else keys + [bias_key]
+    if bias_key is not None:
+        keys.append(bias_key)
+    return keys if offset_key is None else keys + [offset_key]
 
 
 def motion_keys(k: int) -> list[int]:
@@ -87,12 +91,14 @@ class FactorBuilder:
         self._offset_noise = gtsam.noiseModel.Isotropic.Sigma(1, sweep_offset_sigma_rad)
 
     def bearing(self, k: int, station_var: int | None, n_hits: int, angle_sigma_rad: float,
-                error: FactorError, bias_key: int | None = None) -> gtsam.CustomFactor:
+                error: FactorError, bias_key: int | None = None,
+                offset_key: int | None = None) -> gtsam.CustomFactor:
         """Sweep k's bearing factor: ``n_hits`` diodes of noise ``angle_sigma_rad``, robust;
         ``station_var`` and ``bias_key`` as in :func:`bearing_keys`."""
         noise = gtsam.noiseModel.Robust.Create(
             self._estimator, gtsam.noiseModel.Isotropic.Sigma(n_hits, angle_sigma_rad))
-        return gtsam.CustomFactor(noise, bearing_keys(k, station_var, bias_key), error)
+        return gtsam.CustomFactor(noise, bearing_keys(k, station_var, bias_key, offset_key),
+                                  error)
 
     def offset_prior(self, k: int) -> gtsam.PriorFactorVector:
         """The zero-mean prior on sweep k's offset."""
@@ -114,9 +120,12 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
     loss = RobustLoss(options.loss, options.huber_k)
     bias = (diode_bias_family(problem.n_sensors) if options.diode_bias_sigma_rad > 0
             else None)
+    offset = (sensor_offset_family(problem.n_sensors) if options.sensor_offset_sigma_m > 0
+              else None)
     layout = VariableLayout.of_problem(problem.n_states, len(problem.station_ids),
                                        fixed_stations=T_world_lh is not None,
-                                       inertial=inertial is not None, diode_bias=bias)
+                                       inertial=inertial is not None, diode_bias=bias,
+                                       sensor_offset=offset)
     ev = FactorEvaluator(problem, layout, loss, options, T_world_lh, inertial)
     build = FactorBuilder(loss, options.sweep_offset_sigma_rad)
     graph = gtsam.NonlinearFactorGraph()
@@ -125,13 +134,20 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
         slot = int(problem.state_station[k])
         var = slot if layout.holds(STATION_POSE, slot) else None
         graph.add(build.bearing(k, var, n, options.angle_sigma_rad, ev.bearing_error(k, slot),
-                                None if bias is None else bias.key(slot)))
+                                None if bias is None else bias.key(slot),
+                                None if offset is None else offset.key(0)))
     for k in range(problem.n_states):
         graph.add(build.offset_prior(k))
     if bias is not None:
         bias_noise = gtsam.noiseModel.Isotropic.Sigma(bias.dim, options.diode_bias_sigma_rad)
         for slot in layout.indices(bias):
             graph.add(gtsam.PriorFactorVector(bias.key(slot), np.zeros(bias.dim), bias_noise))
+    if offset is not None:
+        graph.add(gtsam.PriorFactorVector(offset.key(0), np.zeros(offset.dim),
+                                          gtsam.noiseModel.Isotropic.Sigma(
+                                              offset.dim, options.sensor_offset_sigma_m)))
+        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(1, SCALE_SIGMA_M2),
+                                     [offset.key(0)], ev.scale_error()))
     for k in range(problem.n_states - 1):
         graph.add(build.motion(k, ev.motion_covariances[k], ev.motion_error(k)))
     if inertial is not None:

@@ -98,6 +98,7 @@ class GraphOptions:
     accel_sigma_mps2: float = option(0.5, gt=0)
     imu_max_gap_s: float = option(0.05, gt=0)
     diode_bias_sigma_rad: float = option(0.0, ge=0)
+    sensor_offset_sigma_m: float = option(0.0, ge=0)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -229,4 +229,6 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
         diode_bias_rad=({sid: b.reshape(2, -1).copy()
                          for sid, b in zip(problem.station_ids, ev.diode_biases(), strict=True)}
                         if options.diode_bias_sigma_rad > 0 else None),
+        sensor_offset_m=(ev.sensor_offsets().copy() if options.sensor_offset_sigma_m > 0
+                         else None),
     )

@@ -87,6 +87,13 @@ def diode_bias_family(n_sensors: int) -> VariableFamily:
                           "angle bias (rad) of each diode and axis as station slot s sees it")
 
 
+def sensor_offset_family(n_sensors: int) -> VariableFamily:
+    """The board's sensor-position corrections: one vector of ``3 * n_sensors`` (m, board
+    frame, row-major by board row), shared by every station."""
+    return VariableFamily("sensor offset", "p", 3 * n_sensors, False, "root", 1.0,
+                          "correction (m, board frame) of every sensor's position")
+
+
 FAMILIES = (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE, IMU_BIAS, GRAVITY)
 """Every family the graph and the streaming smoother know."""
 
@@ -115,8 +122,8 @@ class VariableLayout:
 
     @classmethod
     def of_problem(cls, n_states: int, n_stations: int, fixed_stations: bool = False,
-                   inertial: bool = False, diode_bias: VariableFamily | None = None
-                   ) -> VariableLayout:
+                   inertial: bool = False, diode_bias: VariableFamily | None = None,
+                   sensor_offset: VariableFamily | None = None) -> VariableLayout:
         """The batch graph's layout: every family per board state ``0..n_states-1``, a station
         pose for slots ``1..n_stations-1`` (none with ``fixed_stations``: tracking, every
         station held at a known pose), and with ``inertial`` one IMU bias and the gravity."""
@@ -127,6 +134,8 @@ class VariableLayout:
                     STATION_POSE: stations, IMU_BIAS: imu, GRAVITY: imu}
         if diode_bias is not None:
             families[diode_bias] = range(n_stations)
+        if sensor_offset is not None:
+            families[sensor_offset] = range(1)
         return cls(families)
 
     @property
@@ -232,6 +241,6 @@ def initial_values(layout: VariableLayout, init: Initialisation,
         layout.insert(values, IMU_BIAS, np.zeros((1, 6)))
         layout.insert(values, GRAVITY, np.asarray(gravity, dtype=float)[None])
     for family in layout.families:
-        if family.name == "diode bias":
+        if family.name in ("diode bias", "sensor offset"):
             layout.insert(values, family, np.zeros((len(layout.indices(family)), family.dim)))
     return values
