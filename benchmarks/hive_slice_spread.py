@@ -26,13 +26,15 @@ import numpy as np
 
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
-from lhgraph.estimation.result import Residuals
+from lhgraph.estimation.result import Residuals, SolveResult
+from lhgraph.geometry.transforms import se3_log
 from lhgraph.importers.hive import import_hive
 from lhgraph.io.angles import Angles, load_angles
 from lhgraph.io.files import check_writable
-from lhgraph.model.board import load_board
+from lhgraph.model.board import Board, load_board, with_sensor_offsets
 from lhgraph.model.station import Convention
 from lhgraph.workflow.inputs import station_models
+from lhgraph.workflow.solve_config import SENSOR_OFFSET_SIGMA_M
 from lhgraph.workflow.window import motion_start
 
 REPO = Path(__file__).resolve().parents[1]
@@ -78,6 +80,57 @@ def diode_means(res: Residuals, min_hits: int = 50) -> list[tuple[int, int, int,
     return rows
 
 
+def slice_differences(board: Board, data: Angles, models: dict, options: GraphOptions,
+                      reference: SolveResult, t0: float) -> tuple[np.ndarray, float, float]:
+    """Station 1 from the three 8 s slices of ``data`` (4 s apart from ``t0``) less its pose
+    in ``reference``, in station 1's frame (mm, (3, 3)); the slices' median position 1-sigma
+    (mm, largest axis) and the rms of their rotation differences (deg)."""
+    L_ref = reference.stations.pose(1)
+    diffs, sigmas, turns = [], [], []
+    for k in range(3):
+        part = data.select((data.time >= t0 + 4 * k) & (data.time < t0 + 4 * k + 8))
+        r = solve_graph(board, part, models, options)
+        D = np.linalg.inv(L_ref) @ r.stations.pose(1)
+        diffs.append(D[:3, 3] * 1e3)
+        turns.append(np.degrees(np.linalg.norm(se3_log(D)[:3])))
+        sigmas.append(np.sqrt(np.max(np.diag(r.stations.stations[1].covariance)[3:])) * 1e3)
+    return np.array(diffs), float(np.median(sigmas)), float(np.sqrt(np.mean(np.square(turns))))
+
+
+def tracker_geometry(board: Board, angles: Angles, models: dict, t0: float) -> list[str]:
+    """The tracker's sensor positions solved on the whole bag (``sensor_offset_sigma_m``, as
+    ``lhgraph solve --board-output``), then the slices solved with that board by default,
+    against the whole bag and against the moving span (the slices' union) solved alike."""
+    lines = ["", "## The tracker's sensor positions solved on the whole bag", "",
+             "The whole bag solved with the sensor offsets on (prior "
+             f"{SENSOR_OFFSET_SIGMA_M * 1e3:g} mm, what `lhgraph solve --board-output` does), "
+             "the board file corrected by them, and every solve of the table below run with "
+             "the default options on the corrected board (or on the file's, for comparison). "
+             "Reference: the whole bag, or the moving span from the motion start to the last "
+             "slice's end (the slices' union, without the rests at both ends).", ""]
+    cal = solve_graph(board, angles, models, GraphOptions(
+        sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M))
+    offsets_mm = np.linalg.norm(cal.sensor_offset_m, axis=1) * 1e3
+    lines += [f"Sensor offsets found: rms {np.sqrt(np.mean(offsets_mm**2)):.2f} mm, largest "
+              f"{offsets_mm.max():.2f} mm; whole-bag residual rms {cal.residuals.rms_urad():.1f}"
+              " µrad with them.", "",
+              "| board | reference | reference rms µrad | slice differences (x, y, z) mm | "
+              "rms of the slice distances mm | rms rotation difference deg | slices about "
+              "their mean mm |", "|---|---|---|---|---|---|---|"]
+    moving = angles.select((angles.time >= t0) & (angles.time < t0 + 16))
+    for name, b in (("file", board), ("solved on the whole bag",
+                                      with_sensor_offsets(board, cal.sensor_offset_m))):
+        for ref_name, data in (("whole bag", angles), ("moving span", moving)):
+            ref = solve_graph(b, data, models)
+            d, _, turn = slice_differences(b, angles, models, GraphOptions(), ref, t0)
+            lines.append(f"| {name} | {ref_name} | {ref.residuals.rms_urad():.1f} | "
+                         + "; ".join(f"({x:+.1f}, {y:+.1f}, {z:+.1f})" for x, y, z in d)
+                         + f" | {np.sqrt(np.mean(np.sum(d**2, axis=1))):.2f} | {turn:.3f} | "
+                         f"{np.sqrt(np.mean(np.sum((d - d.mean(axis=0))**2, axis=1))):.2f} |")
+            print(lines[-1], flush=True)
+    return lines
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--bag", type=Path, default=BAG)
@@ -107,20 +160,14 @@ def main() -> int:
         data = shifted(angles, 1, shift_s) if shift_s else angles
         whole = solve_graph(board, data, models, options)
         default = default or whole
-        L_whole = whole.stations.pose(1)
-        diffs, sigmas = [], []
-        for k in range(3):
-            part = data.select((data.time >= t0 + 4 * k) & (data.time < t0 + 4 * k + 8))
-            r = solve_graph(board, part, models, options)
-            diffs.append((np.linalg.inv(L_whole) @ r.stations.pose(1))[:3, 3] * 1e3)
-            sigmas.append(np.sqrt(np.max(np.diag(r.stations.stations[1].covariance)[3:])) * 1e3)
-        d = np.array(diffs)
+        d, sigma_mm, _ = slice_differences(board, data, models, options, whole, t0)
         lines.append(f"| {name} | {whole.residuals.rms_urad():.1f} | "
                      + "; ".join(f"({x:+.1f}, {y:+.1f}, {z:+.1f})" for x, y, z in d)
                      + f" | {np.sqrt(np.mean(np.sum(d**2, axis=1))):.2f} | "
                      f"{np.sqrt(np.mean(np.sum((d - d.mean(axis=0))**2, axis=1))):.2f} | "
-                     f"{np.median(sigmas):.2f} |")
+                     f"{sigma_mm:.2f} |")
         print(lines[-1], flush=True)
+    lines += tracker_geometry(board, angles, models, t0)
     lines += ["", "What repeats at a diode: the default whole-bag solve's inlier residuals (robust "
               "weight > 0.5) per station, axis and diode (diodes with at least 50): the rms "
               "over the diodes of their mean residual, against the median of their spread "
