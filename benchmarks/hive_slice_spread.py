@@ -39,6 +39,7 @@ from lhgraph.workflow.window import motion_start
 
 REPO = Path(__file__).resolve().parents[1]
 BAG = REPO.parent / "shared/data/hive-env8/data8.11.bag"
+REST_KEEP_EVERY = 10
 VARIANTS: dict[str, tuple[float, GraphOptions]] = {
     "default": (0.0, GraphOptions()),
     "station 1 hits +2 ms": (2e-3, GraphOptions()),
@@ -100,14 +101,18 @@ def slice_differences(board: Board, data: Angles, models: dict, options: GraphOp
 def tracker_geometry(board: Board, angles: Angles, models: dict, t0: float) -> list[str]:
     """The tracker's sensor positions solved on the whole bag (``sensor_offset_sigma_m``, as
     ``lhgraph solve --board-output``), then the slices solved with that board by default,
-    against the whole bag and against the moving span (the slices' union) solved alike."""
+    against the whole bag, the whole bag with its rests thinned and the moving span (the
+    slices' union) solved alike."""
     lines = ["", "## The tracker's sensor positions solved on the whole bag", "",
              "The whole bag solved with the sensor offsets on (prior "
              f"{SENSOR_OFFSET_SIGMA_M * 1e3:g} mm, what `lhgraph solve --board-output` does), "
              "the board file corrected by them, and every solve of the table below run with "
              "the default options on the corrected board (or on the file's, for comparison). "
-             "Reference: the whole bag, or the moving span from the motion start to the last "
-             "slice's end (the slices' union, without the rests at both ends).", ""]
+             "Reference: the whole bag, the whole bag with its rests thinned "
+             f"(`rest_keep_every = {REST_KEEP_EVERY}`: one 0.1 s window in {REST_KEEP_EVERY} "
+             "of the rests at both ends, lhgraph.estimation.rests; the slices hold no rest), "
+             "or the moving span from the motion start to the last slice's end (the slices' "
+             "union, without the rests).", ""]
     cal = solve_graph(board, angles, models, GraphOptions(
         sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M))
     offsets_mm = np.linalg.norm(cal.sensor_offset_m, axis=1) * 1e3
@@ -120,15 +125,44 @@ def tracker_geometry(board: Board, angles: Angles, models: dict, t0: float) -> l
     moving = angles.select((angles.time >= t0) & (angles.time < t0 + 16))
     for name, b in (("file", board), ("solved on the whole bag",
                                       with_sensor_offsets(board, cal.sensor_offset_m))):
-        for ref_name, data in (("whole bag", angles), ("moving span", moving)):
-            ref = solve_graph(b, data, models)
-            d, _, turn = slice_differences(b, angles, models, GraphOptions(), ref, t0)
+        for ref_name, data, options in (
+                ("whole bag", angles, GraphOptions()),
+                (f"whole bag, rests thinned (1 in {REST_KEEP_EVERY})", angles,
+                 GraphOptions(rest_keep_every=REST_KEEP_EVERY)),
+                ("moving span", moving, GraphOptions())):
+            ref = solve_graph(b, data, models, options)
+            d, _, turn = slice_differences(b, angles, models, options, ref, t0)
             lines.append(f"| {name} | {ref_name} | {ref.residuals.rms_urad():.1f} | "
                          + "; ".join(f"({x:+.1f}, {y:+.1f}, {z:+.1f})" for x, y, z in d)
                          + f" | {np.sqrt(np.mean(np.sum(d**2, axis=1))):.2f} | {turn:.3f} | "
                          f"{np.sqrt(np.mean(np.sum((d - d.mean(axis=0))**2, axis=1))):.2f} |")
             print(lines[-1], flush=True)
+    lines += held_out_boards(board, angles, models, t0)
     return lines
+
+
+def held_out_boards(board: Board, angles: Angles, models: dict, t0: float) -> list[str]:
+    """Each slice judged with a board solved without it: the sensor positions solved on the
+    bag less that slice, then that board for the slice and for the whole bag (rests thinned),
+    so the board never saw the data it is judged on."""
+    options = GraphOptions(rest_keep_every=REST_KEEP_EVERY)
+    diffs, turns = [], []
+    for k in range(3):
+        inside = (angles.time >= t0 + 4 * k) & (angles.time < t0 + 4 * k + 8)
+        cal = solve_graph(board, angles.select(~inside), models,
+                          GraphOptions(sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M))
+        b = with_sensor_offsets(board, cal.sensor_offset_m)
+        whole = solve_graph(b, angles, models, options)
+        part = solve_graph(b, angles.select(inside), models, options)
+        D = np.linalg.inv(whole.stations.pose(1)) @ part.stations.pose(1)
+        diffs.append(D[:3, 3] * 1e3)
+        turns.append(np.degrees(np.linalg.norm(se3_log(D)[:3])))
+    d = np.array(diffs)
+    return ["", "Held out: each slice with the sensor positions solved on the bag *without* "
+            "that slice, against the whole bag (rests thinned) solved with the same board: "
+            + "; ".join(f"({x:+.1f}, {y:+.1f}, {z:+.1f})" for x, y, z in d)
+            + f" mm; rms {np.sqrt(np.mean(np.sum(d**2, axis=1))):.2f} mm / "
+            f"{np.sqrt(np.mean(np.square(turns))):.3f}°."]
 
 
 def main() -> int:

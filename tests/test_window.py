@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from lhgraph.errors import InputError
+from lhgraph.estimation.rests import rest_spans, thin_rests
 from lhgraph.geometry.transforms import make_pose, so3_exp, transform_points
 from lhgraph.io.angles import Angles
 from lhgraph.model.station import ideal_angles
@@ -88,3 +89,28 @@ def test_rest_rate_is_noise_and_moving_rate_is_far_above_threshold():
 def test_non_positive_duration_is_refused():
     with pytest.raises(InputError, match="duration"):
         moving_window(capture(1.0, 5.0), 0.0)
+
+
+def test_rests_are_found_and_thinned_to_whole_windows():
+    """Rests before 3 s and after 9 s (a 0.5 s bump at 10 s: two rests there, the shorter
+    one, 9-10 s, still one); thinning keeps every moving hit, about one 0.1 s window in
+    ``keep_every`` of each rest, in whole windows (every station and axis alike)."""
+    a = capture(3.0, 9.0, total_s=14.0, bump_at_s=10.0)
+    spans = rest_spans(a)
+    assert len(spans) == 3
+    np.testing.assert_allclose(spans[:, 0], [0.0, 9.0, 10.5], atol=0.26)
+    np.testing.assert_allclose(spans[:, 1], [3.0, 10.0, 14.0], atol=0.26)
+    thinned, report = thin_rests(a, 10)
+    in_rest = np.zeros(len(a), dtype=bool)
+    for t0, t1 in spans:
+        in_rest |= (a.time >= t0) & (a.time < t1)
+    assert np.all(np.isin(a.time[~in_rest], thinned.time))  # the motion is all kept
+    kept = np.isin(a.time, thinned.time) & in_rest
+    assert report.hits_kept == kept.sum() and report.hits_dropped == len(a) - len(thinned)
+    assert kept.sum() / in_rest.sum() == pytest.approx(0.1, abs=0.03)
+    window = np.floor(a.time[kept] * 1e4).astype(int) // 1000  # 0.1 s windows of kept hits
+    cycles = np.bincount(a.lighthouse[kept] * 2 + a.axis[kept], minlength=4)
+    assert cycles.min() >= 0.9 * cycles.max() and len(np.unique(window)) >= 5
+    assert "3 rest(s)" in report.summary()
+    same, none = thin_rests(a, 1)
+    assert same is a and none.hits_dropped == 0

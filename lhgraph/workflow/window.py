@@ -5,9 +5,10 @@ pose only through one board pose. Long recordings often start and end with the b
 rest, so :func:`moving_window` cuts the first ``duration_s`` seconds from the moment the
 board starts moving, judged from the angles themselves (no other sensor needed):
 
-1. every hit series of one (station, axis, sensor) gives angle rates
-   ``|delta angle| / delta t`` between consecutive hits (at most ``max_gap_s`` apart), dated
-   at the midpoint;
+1. (:func:`~lhgraph.estimation.rests.motion_rate`) every hit series of one (station, axis,
+   sensor) gives angle rates
+``|delta angle| / delta t`` between consecutive hits (at most ``max_gap_s`` apart),
+   dated at the midpoint;
 2. the rates are binned in ``bin_s`` bins; a bin is *moving* when the median rate of all
    series in it exceeds ``threshold_rad_s`` (the median ignores reflections and the few
    sensors a rotation about them leaves still);
@@ -27,36 +28,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
+from lhgraph.estimation.rests import motion_rate
 from lhgraph.io.angles import Angles
 
 Array = NDArray[np.float64]
-
-
-def motion_rate(angles: Angles, bin_s: float = 0.25, max_gap_s: float = 0.1
-                ) -> tuple[Array, Array]:
-    """Median angle rate (rad/s) of all hit series per time bin.
-
-    Returns ``(bin_start_s, median_rate_rad_s)``; bins without any rate are NaN. Bins start
-    at the first hit time and are ``bin_s`` long.
-    """
-    key = (angles.lighthouse.astype(np.int64) * 2 + angles.axis) * (
-        int(angles.sensor.max(initial=0)) + 1) + angles.sensor
-    order = np.lexsort((angles.time, key))
-    k, t, a = key[order], angles.time[order], angles.angle[order]
-    dt = np.diff(t)
-    pair = (k[1:] == k[:-1]) & (dt > 0) & (dt <= max_gap_s)
-    rate = np.abs(np.diff(a))[pair] / dt[pair]
-    mid = 0.5 * (t[1:] + t[:-1])[pair]
-    t0 = float(angles.time.min(initial=0.0))
-    n_bins = max(int(np.ceil((float(angles.time.max(initial=0.0)) - t0) / bin_s)), 1)
-    b = np.minimum(((mid - t0) / bin_s).astype(np.int64), n_bins - 1)
-    median = np.full(n_bins, np.nan)
-    order = np.lexsort((rate, b))
-    b, rate = b[order], rate[order]
-    bounds = np.searchsorted(b, np.arange(n_bins + 1))
-    for i in np.flatnonzero(np.diff(bounds) > 0):
-        median[i] = np.median(rate[bounds[i]:bounds[i + 1]])
-    return t0 + bin_s * np.arange(n_bins), median
 
 
 def motion_start(angles: Angles, threshold_rad_s: float = 0.01, min_moving_s: float = 1.0,

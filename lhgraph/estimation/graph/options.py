@@ -62,7 +62,13 @@ class GraphOptions:
     ``imu_max_gap_s`` of a state; ``diode_bias_sigma_rad``: when positive, every station
     sees every diode on each axis with a constant angle bias of this prior spread (variables
     of the graph, :func:`~lhgraph.estimation.graph.variables.diode_bias_family`: the board's
-    geometry errors and the diodes' own delays, which repeat from sweep to sweep); 0: none.
+    geometry errors and the diodes' own delays, which repeat from sweep to sweep); 0: none;
+    ``sensor_offset_sigma_m``: when positive, a correction of every sensor's position is
+    solved with this prior spread (:func:`~lhgraph.estimation.graph.variables.
+    sensor_offset_family`); ``rest_keep_every``: where the board rests (still for 1 s or
+    more, :func:`~lhgraph.estimation.rests.rest_spans`) the calibration keeps the hits of one
+    0.1 s window in this many (1: all), since a rest's sweeps repeat one pose and its
+    repeating errors (:mod:`lhgraph.estimation.rests`).
     Each field's
     allowed range is declared next to it; a value outside it raises
     :class:`~lhgraph.errors.InputError` naming the field.
@@ -99,6 +105,7 @@ class GraphOptions:
     imu_max_gap_s: float = option(0.05, gt=0)
     diode_bias_sigma_rad: float = option(0.0, ge=0)
     sensor_offset_sigma_m: float = option(0.0, ge=0)
+    rest_keep_every: int = option(1, ge=1)
 
     def __post_init__(self) -> None:
         check_fields(self)

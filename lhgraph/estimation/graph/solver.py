@@ -32,6 +32,7 @@ from lhgraph.estimation.init import Initialiser
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp_kabsch import Initialisation, PnPKabschInitialiser
 from lhgraph.estimation.problem import GraphProblem, build_problem
+from lhgraph.estimation.rests import thin_rests
 from lhgraph.estimation.result import Residuals, SolveResult
 from lhgraph.estimation.sweep_times import co_logged_stations, plane_cycles, retime_cycles
 from lhgraph.io.angles import Angles
@@ -67,7 +68,9 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     accelerometer factors (:mod:`lhgraph.estimation.inertial`), the IMU bias and the world's
     gravity estimated with the stations (started from the initialiser instead, the IMU
     factors hold states in their mirror poses: on the Crazyflie log that solve did not
-    converge in 60 iterations).
+    converge in 60 iterations). With ``options.rest_keep_every`` > 1 the board's rests are
+    thinned first (:func:`~lhgraph.estimation.rests.thin_rests`; the hits left out are
+    counted in ``diagnostics["rest_hits_dropped"]``).
     """
     options = options or GraphOptions()
     models = models or {}
@@ -79,6 +82,11 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         raise SolverError(f"only station(s) {stations} seen: need at least two")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    rests = None
+    if options.rest_keep_every > 1:
+        angles, rests = thin_rests(angles, options.rest_keep_every)
+        if progress and rests.hits_dropped:
+            progress(rests.summary())
     angles, options, few = graph_preparation(angles, options, progress, models)
     problem = build_problem(board, angles, models, reference)
     if initialiser is None:
@@ -103,7 +111,10 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
                       error_history=light.error_history + fit.error_history)
     timings["optimise"] = time.perf_counter() - t1
     ev.evaluate(fit.values)
-    return _result(angles, problem, ev, fit, cov, options, timings, t0, init.parents)
+    result = _result(angles, problem, ev, fit, cov, options, timings, t0, init.parents)
+    if rests is not None:
+        result.diagnostics["rest_hits_dropped"] = float(rests.hits_dropped)
+    return result
 
 
 def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation,
