@@ -58,10 +58,9 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from joblib import Parallel, delayed  # noqa: E402
 
-from lhgraph.estimation.bound import information_bound  # noqa: E402
+from lhgraph.estimation.bound import information_bound, true_values  # noqa: E402
 from lhgraph.estimation.graph.options import GraphOptions  # noqa: E402
 from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
-from lhgraph.estimation.init.pnp_kabsch import Initialisation  # noqa: E402
 from lhgraph.estimation.problem import build_problem  # noqa: E402
 from lhgraph.geometry.transforms import inverse, se3_log  # noqa: E402
 from lhgraph.io.files import check_writable  # noqa: E402
@@ -70,19 +69,6 @@ from lhgraph.sim.simulate import SimulatedCapture, load_simulation_config, simul
 
 ROOT = Path(__file__).resolve().parents[1]
 ROTOR_RAD_S = 2 * np.pi * 60.0
-TWIST_STEP_S = 1e-4
-
-
-def true_values(sim: SimulatedCapture, state_time: np.ndarray) -> Initialisation:
-    """The truth as graph values: station poses (world = station 0), the board's poses and
-    body twists ``[omega, v]`` (central difference of the exact motion) at the state times."""
-    truth = sim.truth.relative_to_reference()
-    L = np.array([truth.pose(s) for s in sorted(truth.indices())])
-    X = sim.motion.pose(state_time)
-    before, after = sim.motion.pose(state_time - TWIST_STEP_S), sim.motion.pose(
-        state_time + TWIST_STEP_S)
-    W = se3_log(inverse(before) @ after) / (2 * TWIST_STEP_S)
-    return Initialisation(L, X, W)
 
 
 def bounds(sim: SimulatedCapture) -> tuple[float, float, float]:
@@ -97,7 +83,7 @@ def bounds(sim: SimulatedCapture) -> tuple[float, float, float]:
     angles = sim.angles.select(np.flatnonzero(~sim.reflected))
     models = {k: s.model for k, s in sim.truth.stations.items()}
     problem = build_problem(sim.board, angles, models, 0)
-    truth = true_values(sim, problem.state_time)
+    truth = true_values(sim.motion.pose, sim.truth, problem.state_time)
     bound = information_bound(problem, truth, options)
     known = information_bound(problem, truth, options, known_path=True)
     return bound.position_rms_m(1), known.position_rms_m(1), bound.psd_factor

@@ -81,19 +81,36 @@ def diode_means(res: Residuals, min_hits: int = 50) -> list[tuple[int, int, int,
     return rows
 
 
+def in_slice(angles: Angles, t0: float, k: int) -> np.ndarray:
+    """Rows of ``angles`` in the k-th 8 s slice (4 s apart from ``t0``)."""
+    return (angles.time >= t0 + 4 * k) & (angles.time < t0 + 4 * k + 8)
+
+
+def difference(L_ref: np.ndarray, L: np.ndarray) -> tuple[np.ndarray, float]:
+    """Station pose ``L`` less ``L_ref``: position in ``L_ref``'s frame (mm) and rotation (deg)."""
+    D = np.linalg.inv(L_ref) @ L
+    return D[:3, 3] * 1e3, float(np.degrees(np.linalg.norm(se3_log(D)[:3])))
+
+
+def spread_cells(d: np.ndarray) -> tuple[str, str, str]:
+    """Table cells of slice differences ``d`` (n, 3) mm: the triplets, the rms of their
+    lengths, and the rms of their lengths about the slices' own mean."""
+    return ("; ".join(f"({x:+.1f}, {y:+.1f}, {z:+.1f})" for x, y, z in d),
+            f"{np.sqrt(np.mean(np.sum(d**2, axis=1))):.2f}",
+            f"{np.sqrt(np.mean(np.sum((d - d.mean(axis=0))**2, axis=1))):.2f}")
+
+
 def slice_differences(board: Board, data: Angles, models: dict, options: GraphOptions,
                       reference: SolveResult, t0: float) -> tuple[np.ndarray, float, float]:
     """Station 1 from the three 8 s slices of ``data`` (4 s apart from ``t0``) less its pose
     in ``reference``, in station 1's frame (mm, (3, 3)); the slices' median position 1-sigma
     (mm, largest axis) and the rms of their rotation differences (deg)."""
-    L_ref = reference.stations.pose(1)
     diffs, sigmas, turns = [], [], []
     for k in range(3):
-        part = data.select((data.time >= t0 + 4 * k) & (data.time < t0 + 4 * k + 8))
-        r = solve_graph(board, part, models, options)
-        D = np.linalg.inv(L_ref) @ r.stations.pose(1)
-        diffs.append(D[:3, 3] * 1e3)
-        turns.append(np.degrees(np.linalg.norm(se3_log(D)[:3])))
+        r = solve_graph(board, data.select(in_slice(data, t0, k)), models, options)
+        position_mm, turn_deg = difference(reference.stations.pose(1), r.stations.pose(1))
+        diffs.append(position_mm)
+        turns.append(turn_deg)
         sigmas.append(np.sqrt(np.max(np.diag(r.stations.stations[1].covariance)[3:])) * 1e3)
     return np.array(diffs), float(np.median(sigmas)), float(np.sqrt(np.mean(np.square(turns))))
 
@@ -132,10 +149,9 @@ def tracker_geometry(board: Board, angles: Angles, models: dict, t0: float) -> l
                 ("moving span", moving, GraphOptions())):
             ref = solve_graph(b, data, models, options)
             d, _, turn = slice_differences(b, angles, models, options, ref, t0)
-            lines.append(f"| {name} | {ref_name} | {ref.residuals.rms_urad():.1f} | "
-                         + "; ".join(f"({x:+.1f}, {y:+.1f}, {z:+.1f})" for x, y, z in d)
-                         + f" | {np.sqrt(np.mean(np.sum(d**2, axis=1))):.2f} | {turn:.3f} | "
-                         f"{np.sqrt(np.mean(np.sum((d - d.mean(axis=0))**2, axis=1))):.2f} |")
+            triplets, rms, about_mean = spread_cells(d)
+            lines.append(f"| {name} | {ref_name} | {ref.residuals.rms_urad():.1f} | {triplets} "
+                         f"| {rms} | {turn:.3f} | {about_mean} |")
             print(lines[-1], flush=True)
     lines += held_out_boards(board, angles, models, t0)
     return lines
@@ -148,21 +164,19 @@ def held_out_boards(board: Board, angles: Angles, models: dict, t0: float) -> li
     options = GraphOptions(rest_keep_every=REST_KEEP_EVERY)
     diffs, turns = [], []
     for k in range(3):
-        inside = (angles.time >= t0 + 4 * k) & (angles.time < t0 + 4 * k + 8)
+        inside = in_slice(angles, t0, k)
         cal = solve_graph(board, angles.select(~inside), models,
                           GraphOptions(sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M))
         b = with_sensor_offsets(board, cal.sensor_offset_m)
         whole = solve_graph(b, angles, models, options)
         part = solve_graph(b, angles.select(inside), models, options)
-        D = np.linalg.inv(whole.stations.pose(1)) @ part.stations.pose(1)
-        diffs.append(D[:3, 3] * 1e3)
-        turns.append(np.degrees(np.linalg.norm(se3_log(D)[:3])))
-    d = np.array(diffs)
+        position_mm, turn_deg = difference(whole.stations.pose(1), part.stations.pose(1))
+        diffs.append(position_mm)
+        turns.append(turn_deg)
+    triplets, rms, _ = spread_cells(np.array(diffs))
     return ["", "Held out: each slice with the sensor positions solved on the bag *without* "
-            "that slice, against the whole bag (rests thinned) solved with the same board: "
-            + "; ".join(f"({x:+.1f}, {y:+.1f}, {z:+.1f})" for x, y, z in d)
-            + f" mm; rms {np.sqrt(np.mean(np.sum(d**2, axis=1))):.2f} mm / "
-            f"{np.sqrt(np.mean(np.square(turns))):.3f}°."]
+            f"that slice, against the whole bag (rests thinned) solved with the same board: "
+            f"{triplets} mm; rms {rms} mm / {np.sqrt(np.mean(np.square(turns))):.3f}°."]
 
 
 def main() -> int:
@@ -195,11 +209,9 @@ def main() -> int:
         whole = solve_graph(board, data, models, options)
         default = default or whole
         d, sigma_mm, _ = slice_differences(board, data, models, options, whole, t0)
-        lines.append(f"| {name} | {whole.residuals.rms_urad():.1f} | "
-                     + "; ".join(f"({x:+.1f}, {y:+.1f}, {z:+.1f})" for x, y, z in d)
-                     + f" | {np.sqrt(np.mean(np.sum(d**2, axis=1))):.2f} | "
-                     f"{np.sqrt(np.mean(np.sum((d - d.mean(axis=0))**2, axis=1))):.2f} | "
-                     f"{sigma_mm:.2f} |")
+        triplets, rms, about_mean = spread_cells(d)
+        lines.append(f"| {name} | {whole.residuals.rms_urad():.1f} | {triplets} | {rms} | "
+                     f"{about_mean} | {sigma_mm:.2f} |")
         print(lines[-1], flush=True)
     lines += tracker_geometry(board, angles, models, t0)
     lines += ["", "What repeats at a diode: the default whole-bag solve's inlier residuals (robust "

@@ -10,17 +10,15 @@ from pathlib import Path
 
 import numpy as np
 
-from lhgraph.estimation.bound import GAUSSIAN_HUBER_K, information_bound
+from lhgraph.estimation.bound import GAUSSIAN_HUBER_K, information_bound, true_values
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
-from lhgraph.estimation.init.pnp_kabsch import Initialisation
 from lhgraph.estimation.problem import build_problem
 from lhgraph.geometry.transforms import inverse, se3_log
 from lhgraph.sim.simulate import load_simulation_config, simulate
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "simulation" / "default.toml"
 SIGMA = 5e-5
-STEP_S = 1e-4
 
 
 def test_bound_matches_the_monte_carlo_spread():
@@ -28,13 +26,10 @@ def test_bound_matches_the_monte_carlo_spread():
     sim = simulate(dataclasses.replace(base, duration_s=2.0, sample_rate_hz=48e6), 11)
     models = {k: s.model for k, s in sim.truth.stations.items()}
     problem = build_problem(sim.board, sim.angles, models, 0)
-    t = problem.state_time
-    X = sim.motion.pose(t)
-    W = se3_log(inverse(sim.motion.pose(t - STEP_S)) @ sim.motion.pose(t + STEP_S)) / (2 * STEP_S)
-    L = np.array([sim.truth.relative_to_reference().pose(s) for s in (0, 1)])
+    truth_values = true_values(sim.motion.pose, sim.truth, problem.state_time)
     options = GraphOptions(angle_sigma_rad=SIGMA, sweep_offset_sigma_rad=2.3e-6)
-    bound = information_bound(problem, Initialisation(L, X, W), options)
-    known = information_bound(problem, Initialisation(L, X, W), options, known_path=True)
+    bound = information_bound(problem, truth_values, options)
+    known = information_bound(problem, truth_values, options, known_path=True)
     assert known.position_rms_m(1) < 0.5 * bound.position_rms_m(1)
     solve_options = dataclasses.replace(
         options, adapt_angle_sigma=False, adapt_motion_prior=False, loss="huber",

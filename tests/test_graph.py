@@ -26,6 +26,8 @@ from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.graph.variables import (
     BOARD_POSE,
     BOARD_TWIST,
+    DIODE_BIAS,
+    SENSOR_OFFSET,
     STATION_POSE,
     SWEEP_OFFSET,
     VariableFamily,
@@ -255,10 +257,9 @@ def test_diode_biases_are_estimated_with_the_stations():
     problem = build_problem(sim.board, angles, {}, 0)
     graph, ev = build_graph(problem, options)
     values = initial_values(ev.layout, PnPKabschInitialiser()(sim.board, angles, problem))
-    for family in ev.layout.families:
-        if family.name in ("diode bias", "sensor offset"):
-            for i in ev.layout.indices(family):
-                values.update(family.key(i), rng.normal(0.0, 1e-4, family.dim))
+    for family in (ev.layout.family(DIODE_BIAS), ev.layout.family(SENSOR_OFFSET)):
+        for i in ev.layout.indices(family):
+            values.update(family.key(i), rng.normal(0.0, 1e-4, family.dim))
     assert ev.cost(values) == pytest.approx(graph.error(values), rel=1e-12)
     assert np.abs(ev.sensor_offsets()).max() > 0
 

@@ -13,6 +13,7 @@ it against the Monte-Carlo spread of the estimate.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import gtsam
@@ -29,12 +30,16 @@ from lhgraph.estimation.graph.variables import (
 )
 from lhgraph.estimation.init.pnp_kabsch import Initialisation
 from lhgraph.estimation.problem import GraphProblem
+from lhgraph.geometry.transforms import inverse, se3_log
+from lhgraph.io.stations import Stations
 
 Array = NDArray[np.float64]
 KNOWN_SIGMA = 1e-9
 """Prior spread (rad, m; rad/s, m/s) that holds a board pose or twist at the truth."""
 GAUSSIAN_HUBER_K = 1e6
 """A Huber scale no residual reaches: the loss is the Gaussian's."""
+TWIST_STEP_S = 1e-4
+"""Half the time step of the central difference that gives the true body twists."""
 
 
 @dataclass(frozen=True)
@@ -49,6 +54,20 @@ class Bound:
         """``sqrt(trace)`` of the slot's position covariance: the rms length of its position
         error at the bound (m)."""
         return float(np.sqrt(np.trace(self.covariance[slot][3:, 3:])))
+
+
+def true_values(pose_at: Callable[[Array], Array], stations: Stations, state_time: Array
+                ) -> Initialisation:
+    """The truth as graph values: ``stations``' poses by slot (world = the reference, the
+    other stations in index order), and at ``state_time`` (s) the board's poses
+    ``pose_at(t)`` -> ``T_world_board`` (K, 4, 4) and body twists ``[omega, v]`` (rad/s,
+    m/s, board frame; central difference of ``pose_at``)."""
+    truth = stations.relative_to_reference()
+    slots = [truth.reference] + [s for s in sorted(truth.indices()) if s != truth.reference]
+    before = pose_at(state_time - TWIST_STEP_S)
+    after = pose_at(state_time + TWIST_STEP_S)
+    return Initialisation(np.array([truth.pose(s) for s in slots]), pose_at(state_time),
+                          se3_log(inverse(before) @ after) / (2 * TWIST_STEP_S))
 
 
 def information_bound(problem: GraphProblem, truth: Initialisation, options: GraphOptions,

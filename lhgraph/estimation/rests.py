@@ -55,7 +55,6 @@ def motion_rate(angles: Angles, bin_s: float = 0.25, max_gap_s: float = 0.1
     return t0 + bin_s * np.arange(n_bins), median
 
 
-
 @dataclass(frozen=True)
 class RestThinning:
     """What :func:`thin_rests` did: the rests found (``spans_s``, (n, 2) start and end, s),

@@ -29,9 +29,9 @@ from lhgraph.io.files import check_writable
 from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
-from lhgraph.model.board import Board, load_board, save_board, with_sensor_offsets
+from lhgraph.model.board import Board, save_board, with_sensor_offsets
 from lhgraph.model.station import StationModel
-from lhgraph.workflow.inputs import check_inputs, load_inputs
+from lhgraph.workflow.inputs import SolveInputs, check_inputs, load_inputs
 from lhgraph.workflow.solve_config import SolveConfig
 
 if TYPE_CHECKING:
@@ -103,10 +103,10 @@ def write_solution(result: SolveResult, output: str | Path, trajectory: str | Pa
     return written
 
 
-def run_config(config: SolveConfig, progress: Callable[[str], None] | None = None
-               ) -> SolveResult:
-    """Load the inputs a config names and solve with its (first) method."""
-    inputs = load_inputs(config)
+def run_config(config: SolveConfig, progress: Callable[[str], None] | None = None,
+               inputs: SolveInputs | None = None) -> SolveResult:
+    """Solve with a config's (first) method, the inputs it names loaded unless given."""
+    inputs = inputs or load_inputs(config)
     return solve(inputs.board, inputs.angles, config.method_list()[0], inputs.models,
                  config.reference, config.graph_options(), progress,
                  world_up=inputs.world_up, imu=inputs.imu)
@@ -133,10 +133,11 @@ def solve_to_files(config: SolveConfig, overwrite: bool = False,
         if target is not None:
             check_writable(target, overwrite, create_parents=False)
     truth = load_stations(config.truth) if config.truth else None
-    result = run_config(config, progress)
+    inputs = load_inputs(config)
+    result = run_config(config, progress, inputs)
     written = write_solution(result, config.output, config.trajectory, overwrite)
     if config.board_output is not None:
-        board = with_sensor_offsets(load_board(config.board), result.sensor_offset_m)
+        board = with_sensor_offsets(inputs.board, result.sensor_offset_m)
         written.append(save_board(board, config.board_output, overwrite))
     errors = station_errors(truth, result.stations) if truth else None
     return result, errors, written

@@ -22,8 +22,10 @@ from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import (
     BOARD_POSE,
     BOARD_TWIST,
+    DIODE_BIAS,
     GRAVITY,
     IMU_BIAS,
+    SENSOR_OFFSET,
     STATION_POSE,
     SWEEP_OFFSET,
     VariableLayout,
@@ -105,12 +107,12 @@ class FactorEvaluator:
         self.gyro_sigma = options.gyro_sigma_rad_s
         self.accel_sigma = options.accel_sigma_mps2
         self._imu = np.zeros(9)  # IMU bias (gyro, accelerometer), gravity
-        self._bias = next((f for f in layout.families if f.name == "diode bias"), None)
+        self._bias = layout.family(DIODE_BIAS)
         self._bias_sigma = options.diode_bias_sigma_rad
         dim = 0 if self._bias is None else self._bias.dim
         self._B = np.zeros((S, dim))
         self._bias_column = problem.hits.axis * problem.n_sensors + problem.hit_sensor
-        self._sensors = next((f for f in layout.families if f.name == "sensor offset"), None)
+        self._sensors = layout.family(SENSOR_OFFSET)
         self._sensor_sigma = options.sensor_offset_sigma_m
         self._P = np.zeros((problem.n_sensors, 3))
         self._hits = problem.hits
@@ -164,11 +166,7 @@ class FactorEvaluator:
         self.evaluate(values)
         bearing = self.loss.cost(self._r_whitened / self._sigma0)
         offsets = 0.5 * (self._O / self._offset_sigma) ** 2
-        biases = 0.5 * (self._B / self._bias_sigma) ** 2 if self._bias is not None else 0.0
-        if self._sensors is not None:
-            biases = np.sum(biases) + 0.5 * np.sum((self._P / self._sensor_sigma) ** 2) + 0.5 * (
-                self._scale_row @ self._P.ravel() / SCALE_SIGMA_M2) ** 2
-        return float(bearing.sum() + offsets.sum() + np.sum(biases)
+        return float(bearing.sum() + offsets.sum() + self._board_prior_cost()
                      + 0.5 * self._motion_chi2().sum() + self._inertial_cost())
 
     def bearing_residuals(self) -> Array:
@@ -326,6 +324,16 @@ class FactorEvaluator:
         H = np.zeros((b - a, self._bias.dim))
         H[np.arange(b - a), self._bias_column[a:b]] = self._bearing_scale
         return H
+
+    def _board_prior_cost(self) -> float:
+        """The priors on the diode biases and the sensor offsets (0 without them)."""
+        cost = 0.0
+        if self._bias is not None:
+            cost += 0.5 * float(np.sum((self._B / self._bias_sigma) ** 2))
+        if self._sensors is not None:
+            cost += 0.5 * float(np.sum((self._P / self._sensor_sigma) ** 2)
+                                + (self._scale_row @ self._P.ravel() / SCALE_SIGMA_M2) ** 2)
+        return cost
 
     def _inertial_cost(self) -> float:
         if self.inertial is None:

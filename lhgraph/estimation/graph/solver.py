@@ -111,10 +111,8 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
                       error_history=light.error_history + fit.error_history)
     timings["optimise"] = time.perf_counter() - t1
     ev.evaluate(fit.values)
-    result = _result(angles, problem, ev, fit, cov, options, timings, t0, init.parents)
-    if rests is not None:
-        result.diagnostics["rest_hits_dropped"] = float(rests.hits_dropped)
-    return result
+    extra = {} if rests is None else {"rest_hits_dropped": float(rests.hits_dropped)}
+    return _result(angles, problem, ev, fit, cov, options, timings, t0, init.parents, extra)
 
 
 def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation,
@@ -197,10 +195,12 @@ def few_diode(angles: Angles) -> bool:
 
 def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: OptimizerResult,
             cov: dict[int, Array], options: GraphOptions, timings: dict[str, float], t0: float,
-            parents: list[int] | None = None) -> SolveResult:
+            parents: list[int] | None = None, diagnostics: dict[str, float] | None = None
+            ) -> SolveResult:
     """The :class:`SolveResult` of a finished solve, ``ev`` evaluated at the result;
     ``parents``: the slot each station's initial pose was joined to (the initialiser's
-    overlap tree), for the weak-link warning."""
+    overlap tree), for the weak-link warning; ``diagnostics``: figures of the solve's own
+    stages, added to the evaluator's."""
     reference = problem.station_ids[0]
     poses = ev.station_poses()
     out: dict[int, Station] = {reference: Station(np.eye(4), np.zeros((6, 6)),
@@ -235,7 +235,8 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
         error_history=fit.error_history,
         diagnostics={"accel_psd_rot": psd_rot, "accel_psd_pos": psd_pos,
                      "motion_chi2_per_dof": ev.motion_chi2_per_dof(),
-                     "angle_sigma_rad": ev.angle_sigma()} | ev.inertial_summary(),
+                     "angle_sigma_rad": ev.angle_sigma()} | ev.inertial_summary()
+                    | (diagnostics or {}),
         gravity_world=ev.gravity(),
         diode_bias_rad=({sid: b.reshape(2, -1).copy()
                          for sid, b in zip(problem.station_ids, ev.diode_biases(), strict=True)}

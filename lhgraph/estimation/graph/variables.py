@@ -80,17 +80,24 @@ GRAVITY = VariableFamily("gravity", "n", 3, False, "root", 1.0,
                          "gravity vector (m/s^2) in the world")
 
 
+DIODE_BIAS = "diode bias"
+SENSOR_OFFSET = "sensor offset"
+"""Names of the two families whose size depends on the board (built per problem by
+:func:`diode_bias_family` and :func:`sensor_offset_family`; :meth:`VariableLayout.family`
+finds them)."""
+
+
 def diode_bias_family(n_sensors: int) -> VariableFamily:
     """The per-diode angle biases of a board of ``n_sensors``: one vector per station slot,
     ``2 * n_sensors`` long (axis-major: ``axis * n_sensors + board row``), in rad."""
-    return VariableFamily("diode bias", "d", 2 * n_sensors, False, "root", 1.0,
+    return VariableFamily(DIODE_BIAS, "d", 2 * n_sensors, False, "root", 1.0,
                           "angle bias (rad) of each diode and axis as station slot s sees it")
 
 
 def sensor_offset_family(n_sensors: int) -> VariableFamily:
     """The board's sensor-position corrections: one vector of ``3 * n_sensors`` (m, board
     frame, row-major by board row), shared by every station."""
-    return VariableFamily("sensor offset", "p", 3 * n_sensors, False, "root", 1.0,
+    return VariableFamily(SENSOR_OFFSET, "p", 3 * n_sensors, False, "root", 1.0,
                           "correction (m, board frame) of every sensor's position")
 
 
@@ -141,6 +148,10 @@ class VariableLayout:
     @property
     def families(self) -> tuple[VariableFamily, ...]:
         return tuple(self._indices)
+
+    def family(self, name: str) -> VariableFamily | None:
+        """This layout's family called ``name`` (None when it has none)."""
+        return next((f for f in self._indices if f.name == name), None)
 
     def indices(self, family: VariableFamily) -> range:
         return self._indices[family]
@@ -240,7 +251,6 @@ def initial_values(layout: VariableLayout, init: Initialisation,
             raise ValueError("a layout with IMU variables needs the initial gravity")
         layout.insert(values, IMU_BIAS, np.zeros((1, 6)))
         layout.insert(values, GRAVITY, np.asarray(gravity, dtype=float)[None])
-    for family in layout.families:
-        if family.name in ("diode bias", "sensor offset"):
-            layout.insert(values, family, np.zeros((len(layout.indices(family)), family.dim)))
+    for family in filter(None, (layout.family(DIODE_BIAS), layout.family(SENSOR_OFFSET))):
+        layout.insert(values, family, np.zeros((len(layout.indices(family)), family.dim)))
     return values
