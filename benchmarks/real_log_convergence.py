@@ -1,0 +1,138 @@
+"""Where the real Crazyflie LH1 log's solve spends its time, and how far it is from converged
+when it stops (issue #14's run-time target: a 120 s deck log in <= 5 s).
+
+    python3 benchmarks/real_log_convergence.py [--caps 20 40 60 120]
+        [--output docs/results/real_log_convergence.md]
+
+1. ``lhgraph import crazyflie`` of the shared LH1 log into a temporary folder.
+2. The default graph solve (the deck, the log's ``ootx.toml``) with the LM iteration limit
+   set to each of ``--caps``: iterations taken, status, in-process seconds, final error and
+   station 1's distance from the longest run's station 1 (position mm, rotation deg), i.e.
+   how much the answer still moves after the default limit (60).
+3. The default solve once more under ``cProfile``: the seconds in GTSAM's elimination, its
+   linearisation (and, inside it, the Python factor callbacks of
+   :class:`~lhgraph.estimation.graph.evaluator.FactorEvaluator`), the back-substitution,
+   the retraction and everything else, per iteration.
+
+Skips (exit 0, one line) without the shared data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import platform
+import pstats
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.geometry.transforms import rotation_angle
+from lhgraph.io.angles import load_angles
+from lhgraph.io.files import check_writable
+from lhgraph.model.board import load_board
+from lhgraph.workflow.inputs import station_models
+
+ROOT = Path(__file__).resolve().parents[1]
+LOG = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")
+STAGES = {"elimination": "eliminateMultifrontal", "linearisation": "linearize",
+          "back-substitution": "optimize", "retraction": "retract"}
+"""Table row -> the name of the GTSAM built-in whose time it is."""
+
+
+def import_log(folder: Path) -> Path:
+    """``lhgraph import crazyflie`` of the shared LH1 log into ``folder``."""
+    subprocess.run([sys.executable, "-m", "lhgraph", "import", "crazyflie",
+                    str(LOG / "log02"), "--system-config", str(LOG / "system-config.yaml"),
+                    "--output", str(folder), "--force"], check=True, capture_output=True)
+    return folder
+
+
+def builtin_seconds(stats: pstats.Stats, name: str) -> float:
+    """Total seconds of the profiled GTSAM built-in called ``name``."""
+    return sum(v[3] for k, v in stats.stats.items() if k[2].endswith(f"gtsam.{name}>"))
+
+
+def callback_seconds(stats: pstats.Stats) -> float:
+    """Cumulative seconds of the evaluator's GTSAM callbacks (the closures called ``error``
+    in evaluator.py)."""
+    return sum(v[3] for k, v in stats.stats.items()
+               if k[0].endswith("graph/evaluator.py") and k[2] == "error")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--caps", type=int, nargs="+", default=[20, 40, 60, 120])
+    ap.add_argument("--output", type=Path,
+                    default=ROOT / "docs/results/real_log_convergence.md")
+    args = ap.parse_args()
+    if not LOG.exists():
+        print(f"skipped: {LOG} not found")
+        return 0
+    check_writable(args.output, overwrite=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        imp = import_log(Path(tmp))
+        angles = load_angles(imp / "angles.csv")
+        board = load_board(imp / "board.toml")
+        models = station_models(imp / "ootx.toml")
+    runs = []
+    for cap in sorted(args.caps):
+        tic = time.perf_counter()
+        result = solve_graph(board, angles, models, GraphOptions(max_iterations=cap))
+        seconds = time.perf_counter() - tic
+        runs.append((cap, result, seconds))
+        print(f"cap {cap}: {result.iterations} iterations, {result.status}, {seconds:.1f} s",
+              flush=True)
+    T_last = runs[-1][1].stations.relative_to_reference().pose(1)
+    lines = ["# The real Crazyflie LH1 log: convergence and where the time goes", "",
+             "Command: `python3 benchmarks/real_log_convergence.py`  ",
+             f"Machine: {platform.machine()}, Python {platform.python_version()}; "
+             f"{time.strftime('%Y-%m-%d')}  ",
+             f"Log: `{LOG.name}/log02` ({len(angles)} hits), the default graph solve with "
+             "the LM iteration limit set to each cap. Distance: station 1 (relative to "
+             f"station 0) from the {runs[-1][0]}-iteration cap's.", "",
+             "## 1. The answer against the iteration limit", "",
+             "| cap | iterations | status | seconds | final error | position from longest "
+             "mm | rotation from longest deg | per iteration s |",
+             "|---|---|---|---|---|---|---|---|"]
+    for cap, result, seconds in runs:
+        T = result.stations.relative_to_reference().pose(1)
+        dpos = np.linalg.norm(T[:3, 3] - T_last[:3, 3]) * 1e3
+        drot = np.degrees(rotation_angle(T_last[:3, :3].T @ T[:3, :3]))
+        lines.append(f"| {cap} | {result.iterations} | {result.status} | {seconds:.1f} | "
+                     f"{result.final_error:.1f} | {dpos:.2f} | {drot:.4f} | "
+                     f"{result.timings_s['optimise'] / result.iterations:.3f} |")
+    profile = cProfile.Profile()
+    profile.enable()
+    result = solve_graph(board, angles, models)
+    profile.disable()
+    stats = pstats.Stats(profile)
+    total = result.timings_s["total"]
+    n = result.iterations
+    lines += ["", f"## 2. Where the default solve's time goes ({n} iterations, {total:.1f} s "
+              "in-process under cProfile)", "", "| stage | seconds | per iteration s | share |",
+              "|---|---|---|---|"]
+    rows = {stage: builtin_seconds(stats, name) for stage, name in STAGES.items()}
+    rows["initialise"] = result.timings_s["initialise"]
+    rows["everything else"] = total - sum(rows.values())
+    callbacks = callback_seconds(stats)
+    for stage, seconds in rows.items():
+        lines.append(f"| {stage} | {seconds:.2f} | {seconds / n:.3f} | {seconds / total:.0%} |")
+        if stage == "linearisation":
+            lines.append(f"| of which Python factor callbacks | {callbacks:.2f} | "
+                         f"{callbacks / n:.3f} | {callbacks / total:.0%} |")
+    lines.append("")
+    args.output.write_text("\n".join(lines))
+    print("\n".join(lines))
+    print(f"wrote {args.output}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
