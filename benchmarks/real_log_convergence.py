@@ -23,7 +23,6 @@ import argparse
 import cProfile
 import platform
 import pstats
-import subprocess
 import sys
 import tempfile
 import time
@@ -39,19 +38,14 @@ from lhgraph.io.files import check_writable
 from lhgraph.model.board import load_board
 from lhgraph.workflow.inputs import station_models
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from crazyflie_real_solve import LOGS, lhgraph  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
-LOG = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")
+LOG = LOGS["lh1"]
 STAGES = {"elimination": "eliminateMultifrontal", "linearisation": "linearize",
           "back-substitution": "optimize", "retraction": "retract"}
 """Table row -> the name of the GTSAM built-in whose time it is."""
-
-
-def import_log(folder: Path) -> Path:
-    """``lhgraph import crazyflie`` of the shared LH1 log into ``folder``."""
-    subprocess.run([sys.executable, "-m", "lhgraph", "import", "crazyflie",
-                    str(LOG / "log02"), "--system-config", str(LOG / "system-config.yaml"),
-                    "--output", str(folder), "--force"], check=True, capture_output=True)
-    return folder
 
 
 def builtin_seconds(stats: pstats.Stats, name: str) -> float:
@@ -72,12 +66,14 @@ def main() -> int:
     ap.add_argument("--output", type=Path,
                     default=ROOT / "docs/results/real_log_convergence.md")
     args = ap.parse_args()
-    if not LOG.exists():
+    if not LOG.is_file():
         print(f"skipped: {LOG} not found")
         return 0
     check_writable(args.output, overwrite=True)
     with tempfile.TemporaryDirectory() as tmp:
-        imp = import_log(Path(tmp))
+        imp = Path(tmp)
+        lhgraph("import", "crazyflie", str(LOG), "--system-config",
+                str(LOG.with_name("system-config.yaml")), "--output", str(imp), "--force")
         angles = load_angles(imp / "angles.csv")
         board = load_board(imp / "board.toml")
         models = station_models(imp / "ootx.toml")
@@ -94,9 +90,9 @@ def main() -> int:
              "Command: `python3 benchmarks/real_log_convergence.py`  ",
              f"Machine: {platform.machine()}, Python {platform.python_version()}; "
              f"{time.strftime('%Y-%m-%d')}  ",
-             f"Log: `{LOG.name}/log02` ({len(angles)} hits), the default graph solve with "
-             "the LM iteration limit set to each cap. Distance: station 1 (relative to "
-             f"station 0) from the {runs[-1][0]}-iteration cap's.", "",
+             f"Log: `{LOG.parent.name}/{LOG.name}` ({len(angles)} hits), the default graph "
+             "solve with the LM iteration limit set to each cap. Distance: station 1 "
+             f"(relative to station 0) from the {runs[-1][0]}-iteration cap's.", "",
              "## 1. The answer against the iteration limit", "",
              "| cap | iterations | status | seconds | final error | position from longest "
              "mm | rotation from longest deg | per iteration s |",
