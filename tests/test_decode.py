@@ -172,6 +172,43 @@ def test_fitted_sync_reference(sim):
     assert len(measured.angles) == len(sim.angles)
 
 
+def test_rotor_jitter_follows_the_own_flash_not_the_fitted_train():
+    # each station's flash and the sweep after it jitter together (the real sync train,
+    # benchmarks/sync_reference.py): timing from the own flash keeps the simulator's
+    # angles, timing from the fitted train carries the jitter, 2 pi sigma / T per sweep
+    jitter_us = 2.0
+    base = replace(default_simulation_config(), duration_s=4.0, clock_ppm=0.0)
+    jittery = simulate(replace(base, noise=replace(base.noise, rotor_jitter_us=jitter_us)), 3)
+    steady = simulate(base, 3)
+    assert not np.array_equal(jittery.slots.sync_start_sample, steady.slots.sync_start_sample)
+    cap = synthesize_capture(jittery, _sim_cals(jittery), np.random.default_rng(2))
+    measured = decode_capture(cap, jittery.board)
+    _check_equal(jittery, measured)
+    fitted = decode_capture(cap, jittery.board, DecodeOptions(sync_reference="fitted"))
+    i_d, i_s = _pair(jittery, fitted.angles)
+    diff = fitted.angles.angle[i_d] - jittery.angles.angle[i_s]
+    sweep = fitted.angles.extra["sweep"][i_d]
+    _, inv, count = np.unique(sweep, return_inverse=True, return_counts=True)
+    per_sweep = np.bincount(inv, diff) / count
+    expected = 2 * np.pi * jitter_us * 1e-6 / (jittery.slots.period_samples / 2e6)
+    assert 0.8 * expected < np.std(per_sweep) < 1.2 * expected
+    # within a sweep every diode moves with it
+    assert np.std(diff - per_sweep[inv]) < 0.1 * expected
+
+
+def test_rotor_jitter_is_an_lh1_key_and_validated():
+    from lhgraph.errors import InputError
+    from lhgraph.sim.config import parse_simulation_config
+
+    with pytest.raises(InputError, match="rotor_jitter_us"):
+        parse_simulation_config({"noise": {"rotor_jitter_us": -1.0}}, "sim.toml")
+    with pytest.raises(InputError, match="LH1"):
+        parse_simulation_config({"generation": 2, "board": "crazyflie_deck",
+                                 "noise": {"rotor_jitter_us": 1.0}}, "sim.toml")
+    config = parse_simulation_config({"noise": {"rotor_jitter_us": 1.5}}, "sim.toml")
+    assert config.noise.rotor_jitter_us == 1.5
+
+
 def test_truncated_and_corrupted_files_decode_what_is_valid(sim, tmp_path):
     cap = synthesize_capture(sim, _sim_cals(sim), np.random.default_rng(7))
     data = encode_capture(cap)

@@ -27,7 +27,8 @@ def add_decode(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="rotor period: fitted to the sync train or 1/60 s (default: fit; "
                    "nominal for libsurvive recordings)")
     p.add_argument("--sync", choices=SYNCS, default="measured",
-                   help="time sweeps from each measured sync flash or from the fitted train")
+                   help="time sweeps from each measured sync flash (default: a real "
+                   "station's flash and sweep jitter together) or from the fitted train")
     add_common_output(p)
     return p
 

@@ -59,13 +59,16 @@ class MotionConfig:
 @dataclass(frozen=True)
 class NoiseConfig:
     """Angle noise (Gaussian, rad), reflections (replaced hits, offset deg), dropouts (per
-    hit) and, LH2 only, dropped whole sweeps (one plane of one revolution, all diodes)."""
+    hit), LH1 only the stations' slot-timing jitter (``rotor_jitter_us``: white, rms, each
+    station's sync flash and the sweep that follows it move together) and, LH2 only,
+    dropped whole sweeps (one plane of one revolution, all diodes)."""
 
     angle_sigma_rad: float = 0.0
     reflection_fraction: float = 0.0
     reflection_offset_deg: tuple[float, float] = (1.0, 20.0)
     dropout_fraction: float = 0.0
     sweep_dropout_fraction: float = 0.0
+    rotor_jitter_us: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -283,8 +286,10 @@ def parse_simulation_config(data: dict[str, Any], source: str | Path,
         reflection_fraction=n.number("reflection_fraction", 0.0, ge=0.0, le=1.0),
         reflection_offset_deg=offset,
         dropout_fraction=n.number("dropout_fraction", 0.0, ge=0.0, le=1.0),
-        sweep_dropout_fraction=n.number("sweep_dropout_fraction", 0.0, ge=0.0, le=1.0))
-    _refuse_other_generation(n, generation, lh1=(), lh2=("sweep_dropout_fraction",))
+        sweep_dropout_fraction=n.number("sweep_dropout_fraction", 0.0, ge=0.0, le=1.0),
+        rotor_jitter_us=n.number("rotor_jitter_us", 0.0, ge=0.0, le=100.0))
+    _refuse_other_generation(n, generation, lh1=("rotor_jitter_us",),
+                             lh2=("sweep_dropout_fraction",))
     n.finish()
 
     v = top.table("visibility")

@@ -129,6 +129,7 @@ def scene_of(config: SimulationConfig) -> Scene:
 
 def schedule(n_stations: int, duration_s: float, fs: float, first_station: int,
              phase: int, t0_s: float, period_s: float = ROTOR_PERIOD_S,
+             jitter_s: NDArray[np.float64] | None = None,
              ) -> tuple[SweepSlots, NDArray[np.float64]]:
     """The slot schedule of a capture and the true sync start times (K, n) (s).
 
@@ -136,13 +137,17 @@ def schedule(n_stations: int, duration_s: float, fs: float, first_station: int,
     ``t0_s + k T/2``; station ``first_station`` flashes first and the others follow
     ``SYNC_SPACING_S`` (scaled like T) apart in index order (cyclically). Slot k is swept by
     station ``((k + phase) // 2) % n`` on axis ``(k + phase) % 2``, so every station/axis is
-    swept once every ``n`` rotor periods (30 Hz with two stations).
+    swept once every ``n`` rotor periods (30 Hz with two stations). ``jitter_s`` (K, n), if
+    given, is added to every station's sync start of every slot: the station's timing
+    jitter, which the sweep of that slot shares (its hits are timed from this sync start).
     """
     scale = period_s / ROTOR_PERIOD_S
     K = int(np.ceil((duration_s - t0_s) / (SLOT_S * scale)))
     k = np.arange(K)
     order = (np.arange(n_stations) - first_station) % n_stations
     sync_s = t0_s + (k[:, None] * SLOT_S + order[None, :] * SYNC_SPACING_S) * scale
+    if jitter_s is not None:
+        sync_s = sync_s + jitter_s[:K]
     slots = SweepSlots(np.ceil(sync_s * fs).astype(np.int64), ((k + phase) // 2) % n_stations,
                        (k + phase) % 2, period_s * fs)
     return slots, sync_s
@@ -244,8 +249,10 @@ def simulate(config: SimulationConfig, seed: int | None = None) -> SimulatedCapt
     ppm = config.clock_ppm
     ppm = float(rng.uniform(-CLOCK_PPM_RANGE, CLOCK_PPM_RANGE)) if ppm is None else ppm
     period_s = ROTOR_PERIOD_S * (1 + ppm * 1e-6)
-    slots, sync_s = schedule(n, config.duration_s, fs, first, phase,
-                             float(rng.uniform(0.0, SLOT_S)), period_s)
+    t0_s = float(rng.uniform(0.0, SLOT_S))
+    jitter = config.noise.rotor_jitter_us * 1e-6
+    slots, sync_s = schedule(n, config.duration_s, fs, first, phase, t0_s, period_s,
+                             _rotor_jitter(jitter, config.duration_s, n, period_s, rng))
 
     # every (slot, sensor) pair is a candidate hit; keep those the diode really sees
     S = len(board.ids)
@@ -315,6 +322,17 @@ def truth_and_imu(config: SimulationConfig, scene: Scene, models: list[StationMo
     truth = Stations(0, {i: Station(scene.T_world_lh[i], None, models[i])
                          for i in range(len(models))}, extra)
     return truth, Trajectory(t_traj, motion.pose(t_traj)), imu
+
+
+def _rotor_jitter(sigma_s: float, duration_s: float, n_stations: int, period_s: float,
+                  rng: np.random.Generator) -> NDArray[np.float64] | None:
+    """White slot-timing jitter (K, n) of rms ``sigma_s`` for every slot a capture of
+    ``duration_s`` can hold (None when ``sigma_s`` is 0: no draw, so captures without jitter
+    are the same as before the option existed)."""
+    if sigma_s <= 0:
+        return None
+    slots = int(np.ceil(duration_s / (period_s / 2))) + 1
+    return rng.normal(0.0, sigma_s, (slots, n_stations))
 
 
 def _timing_noise(config: SimulationConfig, t: NDArray, period_s: float | NDArray,
