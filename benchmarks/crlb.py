@@ -4,6 +4,7 @@ measurement; the bound itself is checked against a Monte-Carlo spread in
 tests/test_bound.py).
 
     python benchmarks/crlb.py [--seeds 6] [--protocol 10] [--jobs 2]
+        [--motion-prior-estimate chi2|redundancy]
         [--output docs/results/crlb.md] [--force]
 
 **The bound.** For each capture, the Fisher information of the graph's own measurement model
@@ -59,7 +60,7 @@ import numpy as np  # noqa: E402
 from joblib import Parallel, delayed  # noqa: E402
 
 from lhgraph.estimation.bound import information_bound, true_values  # noqa: E402
-from lhgraph.estimation.graph.options import GraphOptions  # noqa: E402
+from lhgraph.estimation.graph.options import PRIOR_ESTIMATES, GraphOptions  # noqa: E402
 from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
 from lhgraph.estimation.problem import build_problem  # noqa: E402
 from lhgraph.geometry.transforms import inverse, se3_log  # noqa: E402
@@ -89,11 +90,13 @@ def bounds(sim: SimulatedCapture) -> tuple[float, float, float]:
     return bound.position_rms_m(1), known.position_rms_m(1), bound.psd_factor
 
 
-def run(family: str, config, seed: int | None) -> dict[str, float]:
-    """One capture: the default solve's error and NEES, and the bound."""
+def run(family: str, config, seed: int | None, estimate: str) -> dict[str, float]:
+    """One capture: the solve's error and NEES (the default options but the motion prior's
+    ``estimate``), and the bound."""
     sim = simulate(config, seed)
     models = {k: s.model for k, s in sim.truth.stations.items()}
-    result = solve_graph(sim.board, sim.angles, models)
+    result = solve_graph(sim.board, sim.angles, models,
+                         GraphOptions(motion_prior_estimate=estimate))
     truth = sim.truth.relative_to_reference().pose(1)
     est = result.stations.relative_to_reference().stations[1]
     xi = se3_log(inverse(truth) @ est.T_world_lh)
@@ -135,17 +138,21 @@ def main() -> int:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--output", default=str(ROOT / "docs/results/crlb.md"))
     parser.add_argument("--force", action="store_true")
+    parser.add_argument("--motion-prior-estimate", choices=PRIOR_ESTIMATES,
+                        default=GraphOptions().motion_prior_estimate,
+                        help="GraphOptions.motion_prior_estimate of the solves")
     args = parser.parse_args()
     out = check_writable(args.output, args.force)
     t0 = time.perf_counter()
-    rows = Parallel(n_jobs=args.jobs)(delayed(run)(f, c, s)
+    rows = Parallel(n_jobs=args.jobs)(delayed(run)(f, c, s, args.motion_prior_estimate)
                                       for f, c, s in families(args.protocol, args.seeds))
     lines = ["# Station 1 against the Cramér–Rao bound at the truth", "",
              f"Command: `{shlex.join(['python', 'benchmarks/crlb.py', *sys.argv[1:]])}`  ",
              f"{time.strftime('%Y-%m-%d')}. Bound and efficiency as defined in the script's "
              "docstring (the graph's measurement model at the true poses, the simulator's "
              "quantisation and Gaussian noise, the motion prior at the true motion's "
-             "strength); error = the default `solve_graph`.", "",
+             "strength); error = `solve_graph` with the default options, "
+             f"`motion_prior_estimate = \"{args.motion_prior_estimate}\"`.", "",
              "| family | captures | median error mm | median bound mm | median error / "
              "median bound | efficiency median (quartiles) | known-path bound mm (median) | "
              "solve's own sigma mm (median) | mean NEES (6 dof) | motion PSD factor: "

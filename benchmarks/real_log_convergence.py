@@ -82,7 +82,7 @@ def perturbed(board, angles, models, perturb_mm: list[float], cap: int) -> list[
     values = initial_values(ev.layout, FewDiodeInitialiser()(board, angles, problem))
     params = LMParams.from_options(options)
     first = levenberg_marquardt(graph, values, ev.cost, ev.layout, params,
-                                NoiseAdaptation(ev, options, None))
+                                NoiseAdaptation(graph, ev, options))
     key = STATION_POSE.key(1)
     P0 = first.values.atPose3(key)
     rows = [f"| none (the default solve run to convergence) | {first.iterations} | "

@@ -12,7 +12,7 @@ import pytest
 from lhgraph.errors import SolverError
 from lhgraph.estimation.graph.factors import build_graph
 from lhgraph.estimation.graph.loss import RobustLoss
-from lhgraph.estimation.graph.noise import NoiseAdaptation
+from lhgraph.estimation.graph.noise import NoiseAdaptation, redundancy
 from lhgraph.estimation.graph.optimizer import (
     LMParams,
     Status,
@@ -286,7 +286,7 @@ def test_covariance_from_the_last_iteration_matches_marginals_at_the_result():
     options = GraphOptions()
     _, graph, ev, values = _graph(sim, options)
     fit = levenberg_marquardt(graph, values, ev.cost, ev.layout, LMParams.from_options(options),
-                              NoiseAdaptation(ev, options))
+                              NoiseAdaptation(graph, ev, options))
     assert fit.status == Status.CONVERGED and fit.covariance_from_last_iteration
     assert len(fit.error_history) == fit.iterations + 1
     assert fit.final_error == fit.error_history[-1] == pytest.approx(graph.error(fit.values))
@@ -294,6 +294,39 @@ def test_covariance_from_the_last_iteration_matches_marginals_at_the_result():
     fresh = gtsam.Marginals(graph.linearize(fit.values), fit.values).marginalCovariance(key)
     np.testing.assert_allclose(fit.covariance(key), fresh, rtol=1e-3,
                                atol=1e-3 * np.abs(fresh).max())
+
+
+def test_motion_prior_redundancy_against_the_dense_hat_matrix():
+    """``redundancy`` (Hutchinson's trace through the sequential Bayes net) against the
+    motion rows' block of the dense hat matrix ``A N^-1 A^T`` of the same linear system."""
+    sim = _capture("default", duration_s=1.0)
+    _, graph, ev, values = _graph(sim, GraphOptions())
+    lin = graph.linearize(values)
+    A, _ = lin.jacobian()
+    bounds = np.cumsum([0] + [lin.at(i).rows() for i in range(lin.size())])
+    rows = np.concatenate([np.arange(bounds[i], bounds[i + 1]) for i in ev.motion_factors])
+    A_m = A[rows]
+    exact = len(rows) - np.trace(A_m @ np.linalg.solve(A.T @ A, A_m.T))
+    n, dof = redundancy(lin, ev.motion_factors, ev.layout.elimination_ordering(),
+                        values.dims(), probes=16)
+    assert n == len(rows) == 12 * len(ev.motion_factors)
+    assert 0 < exact < n
+    assert dof == pytest.approx(exact, rel=0.15)
+
+
+def test_redundancy_estimate_loosens_the_prior_without_a_floor():
+    """The plain mean square of the prior's whitened residuals sits far below 1 at the
+    solution (the fit absorbs them) and needs the floor; counted over the prior's redundancy
+    the estimate lands between that and the floor's start, and a solve with it still finds
+    the stations."""
+    sim = _capture("default", duration_s=3.0)
+    plain = solve_graph(sim.board, sim.angles, _models(sim), GraphOptions(min_psd_factor=1e-4))
+    counted = solve_graph(sim.board, sim.angles, _models(sim),
+                          GraphOptions(motion_prior_estimate="redundancy"))
+    assert plain.diagnostics["accel_psd_pos"] < counted.diagnostics["accel_psd_pos"]
+    assert counted.diagnostics["accel_psd_pos"] < GraphOptions().accel_psd_pos
+    assert counted.status == "converged"
+    assert station_errors(sim.truth, counted.stations)[0].position_norm_m < 3e-3
 
 
 @pytest.mark.parametrize(("name", "seed"), [("default", 1), ("realistic", 1)])

@@ -100,6 +100,9 @@ class FactorEvaluator:
         """``(K - 1, 12, 12)`` covariance of each motion prior at the configured PSDs (the
         factors' noise models)."""
         self._Q_inv = np.linalg.inv(self.motion_covariances)
+        self.motion_factors = range(0)
+        """Indices of the motion priors in the graph the callbacks serve (set by
+        :func:`~lhgraph.estimation.graph.factors.build_graph`)."""
         self._motion_scale = 1.0  # 1/sqrt(s): the motion prior's covariance is s * Q
         self._bearing_scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
         self._jacobians_ready = False

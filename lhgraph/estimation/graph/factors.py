@@ -148,8 +148,10 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
                                               offset.dim, options.sensor_offset_sigma_m)))
         graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(1, SCALE_SIGMA_M2),
                                      [offset.key(0)], ev.scale_error()))
+    first = graph.size()
     for k in range(problem.n_states - 1):
         graph.add(build.motion(k, ev.motion_covariances[k], ev.motion_error(k)))
+    ev.motion_factors = range(first, graph.size())
     if inertial is not None:
         for k in np.flatnonzero(inertial.rate_ok).tolist():
             graph.add(gyro_factor(k, inertial.rate[k], options.gyro_sigma_rad_s))

@@ -9,6 +9,7 @@ from lhgraph.config import check_fields, option
 LOSSES = ("cauchy", "huber")
 SOLVERS = ("lm", "isam2")
 SWEEP_TIMES = ("auto", "stamped")
+PRIOR_ESTIMATES = ("chi2", "redundancy")
 
 
 @dataclass(frozen=True)
@@ -24,7 +25,11 @@ class GraphOptions:
     (rad^2/s^3) and linear (m^2/s^3) acceleration noise in the motion prior (starting values
     when ``adapt_motion_prior``: then up to ``motion_prior_rounds`` variance-component updates
     rescale both to the solved motion, LM solver only, kept within [``min_psd_factor``,
-    ``max_psd_factor``] times the start); ``solver``:
+    ``max_psd_factor``] times the start); ``motion_prior_estimate``: how an update rescales
+    the prior: ``"chi2"`` to its whitened residuals' mean square per degree of freedom,
+    ``"redundancy"`` to their sum over the prior's redundancy (its rows less the trace of
+    their hat matrix, :func:`~lhgraph.estimation.graph.noise.redundancy`: the degrees of
+    freedom the fit leaves the prior; no floor, ``min_psd_factor`` unused); ``solver``:
     ``"lm"`` (Levenberg-Marquardt on GTSAM's linear solver) or ``"isam2"``;
     ``max_iterations``; LM stops when the stations are estimated to be within
     ``step_tolerance_sigma`` of their standard deviations from the converged solution and no
@@ -86,6 +91,7 @@ class GraphOptions:
     max_sigma_factor: float = option(10.0, ge=1)
     min_psd_factor: float = option(0.2, gt=0, le=1)
     motion_prior_rounds: int = option(5, ge=0)
+    motion_prior_estimate: str = option("chi2", choices=PRIOR_ESTIMATES)
     solver: str = option("lm", choices=SOLVERS)
     max_iterations: int = option(60, gt=0)
     relative_tolerance: float = option(1e-5, ge=0, lt=1)

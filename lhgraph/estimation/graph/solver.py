@@ -126,8 +126,8 @@ def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation
     values = initial_values(ev.layout, init, gravity)
     try:
         if options.solver == "lm":
-            hook = (NoiseAdaptation(ev, options, progress) if NoiseAdaptation.enabled(options)
-                    else None)
+            hook = (NoiseAdaptation(graph, ev, options, progress)
+                    if NoiseAdaptation.enabled(options) else None)
             fit = levenberg_marquardt(graph, values, ev.cost, ev.layout,
                                       LMParams.from_options(options), hook, progress)
         else:

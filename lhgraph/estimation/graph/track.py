@@ -262,7 +262,8 @@ def track(board: Board, angles: Angles, stations: Stations,
                     f"; IMU factors at {int(inertial.rate_ok.sum())} states"))
     graph, ev = build_graph(problem, options, T_world_lh, inertial)
     values = initial_values(ev.layout, init, gravity)
-    hook = NoiseAdaptation(ev, options, progress) if NoiseAdaptation.enabled(options) else None
+    hook = (NoiseAdaptation(graph, ev, options, progress) if NoiseAdaptation.enabled(options)
+            else None)
     try:
         fit = levenberg_marquardt(graph, values, ev.cost, ev.layout,
                                   LMParams.from_options(options), hook, progress)
