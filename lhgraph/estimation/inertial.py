@@ -48,13 +48,31 @@ class InertialData:
     """The IMU readings at a problem's K board states: ``rate`` (K, 3) the gyro at each
     state's time (rad/s, board frame), ``rate_ok`` (K,) where it has samples within the gap;
     ``force`` (K - 1, 3) the specific force over each step in its first state's frame
-    (m/s^2), ``force_ok`` (K - 1,) likewise; ``dt`` (K - 1,) the steps (s)."""
+    (m/s^2), ``force_ok`` (K - 1,) likewise; ``dt`` (K - 1,) the steps (s). ``stream``,
+    ``state_time`` and ``half_turn`` (K - 1, 3, 3: each step's middle frame seen from its
+    first state's) let :meth:`read_at` sample the stream again at a time offset."""
 
     rate: Array
     rate_ok: NDArray[np.bool_]
     force: Array
     force_ok: NDArray[np.bool_]
     dt: Array
+    stream: ImuStream | None = None
+    state_time: Array | None = None
+    half_turn: Array | None = None
+
+    def read_at(self, offset_s: float) -> tuple[Array, Array, Array, Array]:
+        """The gyro at every state and the specific force over every step with the IMU read
+        ``offset_s`` later on the light's clock (an IMU stamped ``offset_s`` early), and
+        their derivatives with respect to the offset: ``(rate, d rate / d offset, force,
+        d force / d offset)``, shapes as :attr:`rate` and :attr:`force` (the derivatives are
+        the slopes of the linear interpolation)."""
+        t, middle = self.state_time + offset_s, self.state_time[:-1] + self.dt / 2 + offset_s
+        rate, rate_slope = _sampled(self.stream.time, self.stream.gyro_rad_s, t)
+        force, force_slope = _sampled(self.stream.time, self.stream.accel_mps2, middle)
+        turn = self.half_turn
+        return (rate, rate_slope, np.einsum("kij,kj->ki", turn, force),
+                np.einsum("kij,kj->ki", turn, force_slope))
 
 
 def _interpolated(t: Array, x: Array, query: Array, max_gap_s: float
@@ -64,8 +82,18 @@ def _interpolated(t: Array, x: Array, query: Array, max_gap_s: float
     i = np.clip(np.searchsorted(t, query), 1, len(t) - 1)
     ok = ((query >= t[0]) & (query <= t[-1]) & (query - t[i - 1] <= max_gap_s)
           & (t[i] - query <= max_gap_s))
-    out = np.stack([np.interp(query, t, x[:, j]) for j in range(3)], axis=1)
-    return out, ok
+    return _sampled(t, x, query)[0], ok
+
+
+def _sampled(t: Array, x: Array, query: Array) -> tuple[Array, Array]:
+    """``x`` (N, 3) sampled at ``t`` (sorted, N >= 2) interpolated linearly at ``query``
+    (held at the ends), and the slope of the segment each query falls in."""
+    i = np.clip(np.searchsorted(t, query), 1, len(t) - 1)
+    span = np.maximum(t[i] - t[i - 1], 1e-12)
+    w = np.clip((query - t[i - 1]) / span, 0.0, 1.0)[:, None]
+    slope = (x[i] - x[i - 1]) / span[:, None]
+    inside = ((query >= t[0]) & (query <= t[-1]))[:, None]
+    return (1 - w) * x[i - 1] + w * x[i], np.where(inside, slope, 0.0)
 
 
 def inertial_data(imu: ImuStream, state_time: Array, max_gap_s: float = 0.05,
@@ -83,12 +111,14 @@ def inertial_data(imu: ImuStream, state_time: Array, max_gap_s: float = 0.05,
     force_mid, force_ok = _interpolated(t, imu.accel_mps2, middle, max_gap_s)
     rate_mid, _ = _interpolated(t, imu.gyro_rad_s, middle, max_gap_s)
     # the frame at the middle seen from state k's: R_k^T R_mid = Exp(omega dt / 2)
-    force = np.einsum("kij,kj->ki", so3_exp(rate_mid * (dt / 2)[:, None]), force_mid)
+    half_turn = so3_exp(rate_mid * (dt / 2)[:, None])
+    force = np.einsum("kij,kj->ki", half_turn, force_mid)
     if not rate_ok.any():
         raise InputError(f"no IMU sample within {max_gap_s * 1e3:.0f} ms of any board state "
                          f"(IMU {t[0]:.3f}-{t[-1]:.3f} s, light {state_time[0]:.3f}-"
                          f"{state_time[-1]:.3f} s): not on the light's clock?", source)
-    return InertialData(rate, rate_ok, force, force_ok & (dt > 0), dt)
+    return InertialData(rate, rate_ok, force, force_ok & (dt > 0), dt, imu,
+                        np.asarray(state_time, dtype=float), half_turn)
 
 
 def initial_gravity(data: InertialData, T_world_board: Array) -> Array:

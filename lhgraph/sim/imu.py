@@ -6,8 +6,10 @@ the accelerometer the specific force ``R^T (a - g)`` (+9.80665 m/s^2 along the s
 at rest), each plus a constant bias drawn once per stream and white noise per sample. The
 default noise is of the order of a small MEMS part's at 100 Hz, such as the Crazyflie 2.1's
 BMI088 (gyro ~0.1 deg/s, accelerometer ~0.02 m/s^2 per sample); the biases are drawn with
-standard deviations 0.005 rad/s and 0.05 m/s^2. No bias random walk, no scale error, no
-lever arm. A simulation config asks for a stream with an ``[imu]`` table
+standard deviations 0.005 rad/s and 0.05 m/s^2. No bias random walk, no lever arm; a gyro
+scale per axis (``gyro_scale_x``/``_y``/``_z``: the gyro reads that times the rate; the hive
+tracker's reads ~0.48) and a stamp delay (``time_offset_s``: a reading of the motion at T
+is stamped T + offset) when asked. A simulation config asks for a stream with an ``[imu]`` table
 (:class:`ImuConfig`, docs/simulator.md); ``lhgraph simulate`` then writes ``imu.csv``.
 """
 
@@ -34,14 +36,19 @@ DIFF_STEP_S = 1e-4
 
 @dataclass(frozen=True)
 class ImuConfig:
-    """Sample rate (Hz), white noise per sample and the standard deviations of the constant
-    biases (gyro rad/s, accelerometer m/s^2)."""
+    """Sample rate (Hz), white noise per sample, the standard deviations of the constant
+    biases (gyro rad/s, accelerometer m/s^2), the gyro's scale per axis and the stamps'
+    delay (s: a reading of the motion at T is stamped T + ``time_offset_s``)."""
 
     rate_hz: float = option(100.0, gt=0, le=10000)
     gyro_sigma_rad_s: float = option(2e-3, ge=0)
     accel_sigma_mps2: float = option(0.02, ge=0)
     gyro_bias_sigma_rad_s: float = option(5e-3, ge=0)
     accel_bias_sigma_mps2: float = option(0.05, ge=0)
+    gyro_scale_x: float = option(1.0, gt=0, le=10)
+    gyro_scale_y: float = option(1.0, gt=0, le=10)
+    gyro_scale_z: float = option(1.0, gt=0, le=10)
+    time_offset_s: float = option(0.0, ge=-1, le=1)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -61,7 +68,8 @@ def imu_of_motion(motion: Motion, up: ArrayLike, duration_s: float, config: ImuC
                   rng: np.random.Generator) -> SimulatedImu:
     """The IMU stream of a board moving by ``motion`` for ``duration_s`` in a world whose up
     is ``up``, noise and biases from ``config`` drawn by ``rng``."""
-    t = np.arange(0.0, duration_s, 1.0 / config.rate_hz)
+    stamp = np.arange(0.0, duration_s, 1.0 / config.rate_hz)
+    t = stamp - config.time_offset_s  # the motion's time of each reading
     h = DIFF_STEP_S
     before, now, after = (motion.pose(t + d) for d in (-h, 0.0, h))
     R = now[:, :3, :3]
@@ -72,9 +80,10 @@ def imu_of_motion(motion: Motion, up: ArrayLike, duration_s: float, config: ImuC
     force = np.einsum("kji,kj->ki", R, accel - gravity)
     bias = np.concatenate([rng.normal(0, config.gyro_bias_sigma_rad_s, 3),
                            rng.normal(0, config.accel_bias_sigma_mps2, 3)])
-    gyro = rate + bias[:3] + rng.normal(0, config.gyro_sigma_rad_s, rate.shape)
+    scale = np.array([config.gyro_scale_x, config.gyro_scale_y, config.gyro_scale_z])
+    gyro = scale * rate + bias[:3] + rng.normal(0, config.gyro_sigma_rad_s, rate.shape)
     accel_read = force + bias[3:] + rng.normal(0, config.accel_sigma_mps2, force.shape)
-    return SimulatedImu(ImuStream(t, accel_read, gyro), bias, gravity)
+    return SimulatedImu(ImuStream(stamp, accel_read, gyro), bias, gravity)
 
 
 def simulate_imu(capture: SimulatedCapture, config: ImuConfig | None = None, seed: int = 0

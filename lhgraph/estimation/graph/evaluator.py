@@ -17,6 +17,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
+from lhgraph.estimation.graph.imu_terms import ImuTerms
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import (
@@ -24,18 +25,15 @@ from lhgraph.estimation.graph.variables import (
     BOARD_TWIST,
     DIODE_BIAS,
     GRAVITY,
-    IMU_BIAS,
     SENSOR_OFFSET,
     STATION_POSE,
     SWEEP_OFFSET,
     VariableLayout,
 )
-from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, InertialData
+from lhgraph.estimation.inertial import InertialData
 from lhgraph.estimation.problem import GraphProblem
 from lhgraph.estimation.residuals import (
-    accel_residuals,
     bearing_residuals,
-    gyro_residuals,
     motion_residuals,
     wnoa_covariance,
 )
@@ -107,9 +105,8 @@ class FactorEvaluator:
         self._bearing_scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
         self._jacobians_ready = False
         self.inertial = inertial
-        self.gyro_sigma = options.gyro_sigma_rad_s
-        self.accel_sigma = options.accel_sigma_mps2
-        self._imu = np.zeros(9)  # IMU bias (gyro, accelerometer), gravity
+        self.imu = None if inertial is None else ImuTerms(inertial, layout, options)
+        """The IMU factors' residuals (None without IMU factors)."""
         self._bias = layout.family(DIODE_BIAS)
         self._bias_sigma = options.diode_bias_sigma_rad
         dim = 0 if self._bias is None else self._bias.dim
@@ -170,7 +167,8 @@ class FactorEvaluator:
         bearing = self.loss.cost(self._r_whitened / self._sigma0)
         offsets = 0.5 * (self._O / self._offset_sigma) ** 2
         return float(bearing.sum() + offsets.sum() + self._board_prior_cost()
-                     + 0.5 * self._motion_chi2().sum() + self._inertial_cost())
+                     + 0.5 * self._motion_chi2().sum()
+                     + (0.0 if self.imu is None else self.imu.cost()))
 
     def bearing_residuals(self) -> Array:
         """Per-hit angle residual, predicted (+ sweep offset) - measured (rad), in the
@@ -229,14 +227,27 @@ class FactorEvaluator:
 
         return error
 
+    def gyro_error(self, k: int) -> FactorError:
+        """Callback of state k's gyro factor with the IMU calibration (keys: twist k, IMU
+        bias, calibration): ``(1 + s) omega_k + gyro bias - gyro(t_k + offset)``."""
+        def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
+            self._ensure(values, k, None)
+            if H is not None:
+                self._jacobians()
+                for j, H_j in enumerate(self.imu.Hg):
+                    H[j] = H_j[k]
+            return self.imu.g[k]
+
+        return error
+
     def motion_error(self, k: int) -> FactorError:
         """Callback of the motion prior between states k and k + 1."""
-        return self._step_callback(k, "_e", "_He")
+        return self._step_callback(k, lambda: self._e, lambda: self._He)
 
     def accel_error(self, k: int) -> FactorError:
         """Callback of the accelerometer factor over the step from state k to k + 1 (keys as
         in :func:`lhgraph.estimation.graph.factors.accel_keys`)."""
-        return self._step_callback(k, "_a", "_Ha")
+        return self._step_callback(k, lambda: self.imu.a, lambda: self.imu.Ha)
 
     def gravity_error(self) -> FactorError:
         """Callback of the gravity-magnitude factor: ``|g| - STANDARD_GRAVITY_MPS2`` (m/s^2); with
@@ -253,47 +264,38 @@ class FactorEvaluator:
     def imu_bias(self) -> Array | None:
         """The IMU bias ``[gyro (rad/s), accelerometer (m/s^2)]`` (6,) now (None without IMU
         factors)."""
-        return None if self.inertial is None else self._imu[:6].copy()
+        return None if self.imu is None else self.imu.imu[:6].copy()
 
     def gravity(self) -> Array | None:
         """The gravity vector (m/s^2, world) now (None without IMU factors)."""
-        return None if self.inertial is None else self._imu[6:].copy()
+        return None if self.imu is None else self.imu.imu[6:].copy()
 
     def inertial_residuals(self) -> tuple[Array, Array]:
         """Gyro (K, 3, rad/s) and accelerometer (K - 1, 3, m/s^2) residuals at the evaluated
         point (NaN where the IMU has no sample; empty without IMU factors)."""
-        if self.inertial is None:
+        if self.imu is None:
             return np.zeros((0, 3)), np.zeros((0, 3))
-        g = np.where(self.inertial.rate_ok[:, None], self._g, np.nan)
-        a = np.where(self.inertial.force_ok[:, None], self._a, np.nan)
-        return g, a
+        return self.imu.residuals()
 
     def inertial_summary(self) -> dict[str, float]:
-        """What the IMU factors found at the evaluated point: the gyro and accelerometer
-        biases' norms, the gravity's magnitude, the rms gyro and accelerometer residuals
-        (empty without IMU factors)."""
-        if self.inertial is None:
-            return {}
-        gyro, accel = self.inertial_residuals()
-        return {"gyro_bias_rad_s": float(np.linalg.norm(self._imu[:3])),
-                "accel_bias_mps2": float(np.linalg.norm(self._imu[3:6])),
-                "gravity_mps2": float(np.linalg.norm(self._imu[6:])),
-                "gyro_rms_rad_s": float(np.sqrt(np.nanmean(gyro**2))),
-                "accel_rms_mps2": float(np.sqrt(np.nanmean(accel**2)))}
+        """What the IMU factors found at the evaluated point (:meth:`ImuTerms.summary`;
+        empty without IMU factors)."""
+        return {} if self.imu is None else self.imu.summary()
 
     # --- internals ------------------------------------------------------------------------
 
-    def _step_callback(self, k: int, residuals: str, jacobians: str) -> FactorError:
+    def _step_callback(self, k: int, residuals: Callable[[], Array],
+                       jacobians: Callable[[], tuple[Array, ...]]) -> FactorError:
         """Callback of a factor between states k and k + 1 whose residual and Jacobians are
-        row k of the evaluator's arrays named ``residuals`` and ``jacobians``."""
+        row k of the arrays ``residuals()`` and ``jacobians()`` give once evaluated."""
         def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
             self._ensure(values, k, None)
             self._ensure(values, k + 1, None)
             if H is not None:
                 self._jacobians()
-                for j, H_j in enumerate(getattr(self, jacobians)):
+                for j, H_j in enumerate(jacobians()):
                     H[j] = H_j[k]
-            return getattr(self, residuals)[k]
+            return residuals()[k]
 
         return error
 
@@ -338,15 +340,6 @@ class FactorEvaluator:
                                 + (self._scale_row @ self._P.ravel() / SCALE_SIGMA_M2) ** 2)
         return cost
 
-    def _inertial_cost(self) -> float:
-        if self.inertial is None:
-            return 0.0
-        d = self.inertial
-        g = self._g[d.rate_ok] / self.gyro_sigma
-        a = self._a[d.force_ok] / self.accel_sigma
-        m = (np.linalg.norm(self._imu[6:]) - STANDARD_GRAVITY_MPS2) / GRAVITY_SIGMA_MPS2
-        return 0.5 * float(np.sum(g * g) + np.sum(a * a) + m * m)
-
     def _scale_residuals(self) -> None:
         self._r_whitened = self._r * self._bearing_scale
         self._e = self._e_raw * self._motion_scale
@@ -375,11 +368,8 @@ class FactorEvaluator:
             self._r += self._B[h.station, self._bias_column]
         self._e_raw = motion_residuals(self._X[:-1], self._W[:-1], self._X[1:], self._W[1:],
                                        self._dt, False)[0]
-        if self.inertial is not None:
-            self._imu = np.concatenate([values.atVector(IMU_BIAS.key(0)),
-                                        values.atVector(GRAVITY.key(0))])
-            self._g = gyro_residuals(self._W, self._imu[:3], self.inertial.rate)
-            self._a = self._accel(False)[0]
+        if self.imu is not None:
+            self.imu.read(values, self._X, self._W)
         self._scale_residuals()
         self._values = values
 
@@ -395,17 +385,9 @@ class FactorEvaluator:
         _, He = motion_residuals(self._X[:-1], self._W[:-1], self._X[1:], self._W[1:],
                                  self._dt)
         self._He = tuple(H * self._motion_scale for H in He)
-        if self.inertial is not None:
-            _, Ha = self._accel(True)
-            H_bias = np.zeros((len(Ha[4]), 3, 6))
-            H_bias[:, :, 3:] = Ha[4]
-            self._Ha = (*Ha[:4], H_bias, Ha[5])
+        if self.imu is not None:
+            self.imu.jacobians()
         self._jacobians_ready = True
-
-    def _accel(self, jacobians: bool) -> tuple[Array, tuple | None]:
-        d = self.inertial
-        return accel_residuals(self._X[:-1], self._W[:-1], self._X[1:], self._W[1:], d.dt,
-                               d.force, self._imu[3:6], self._imu[6:], jacobians)
 
     def _ensure(self, values: gtsam.Values, k: int, slot: int | None) -> None:
         # A Python-owned Values reaches every callback as the same object: identity is
@@ -421,9 +403,7 @@ class FactorEvaluator:
                     values.atVector(self._sensors.key(0)), self._P.ravel()))
                 and (self._bias is None or np.array_equal(
                     self.layout.read_vectors(values, self._bias), self._B))
-                and (self.inertial is None or (
-                    np.array_equal(values.atVector(IMU_BIAS.key(0)), self._imu[:6])
-                    and np.array_equal(values.atVector(GRAVITY.key(0)), self._imu[6:])))):
+                and (self.imu is None or self.imu.matches(values))):
             self._values = values
             return
         self._read(values)

@@ -13,8 +13,10 @@
    :func:`motion_keys`;
 4. with an IMU stream (:mod:`lhgraph.estimation.inertial`): a **gyro factor** on every
    state's twist and the IMU bias (linear: GTSAM's ``LinearContainerFactor``, no Python
-   callback), an **accelerometer factor** over every step, keys :func:`accel_keys`, and
-   one factor on the gravity's magnitude.
+   callback; with the IMU calibration, ``gyro_scale_sigma`` / ``imu_time_offset_sigma_s``,
+   a callback on the twist, the bias and the calibration), an **accelerometer factor** over
+   every step, keys :func:`accel_keys`, one factor on the gravity's magnitude and, with the
+   calibration, its zero-mean prior.
 
 The residuals come from :mod:`lhgraph.estimation.residuals`; who evaluates them is the
 caller's choice (the batch graph's vectorised :class:`FactorEvaluator`, the streaming
@@ -35,6 +37,7 @@ from lhgraph.estimation.graph.variables import (
     BOARD_TWIST,
     GRAVITY,
     IMU_BIAS,
+    IMU_CALIBRATION,
     STATION_POSE,
     SWEEP_OFFSET,
     VariableLayout,
@@ -65,9 +68,11 @@ def motion_keys(k: int) -> list[int]:
     return [BOARD_POSE.key(k), BOARD_TWIST.key(k), BOARD_POSE.key(k + 1), BOARD_TWIST.key(k + 1)]
 
 
-def accel_keys(k: int) -> list[int]:
-    """Keys of the accelerometer factor over the step from state k to k + 1."""
-    return motion_keys(k) + [IMU_BIAS.key(0), GRAVITY.key(0)]
+def accel_keys(k: int, calibration: bool = False) -> list[int]:
+    """Keys of the accelerometer factor over the step from state k to k + 1 (and the IMU
+    calibration, whose time offset moves the reading, when the graph has it)."""
+    keys = motion_keys(k) + [IMU_BIAS.key(0), GRAVITY.key(0)]
+    return keys + [IMU_CALIBRATION.key(0)] if calibration else keys
 
 
 def gyro_factor(k: int, rate: Array, sigma_rad_s: float) -> gtsam.LinearContainerFactor:
@@ -122,10 +127,11 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
             else None)
     offset = (sensor_offset_family(problem.n_sensors) if options.sensor_offset_sigma_m > 0
               else None)
+    calibrated = options.gyro_scale_sigma > 0 or options.imu_time_offset_sigma_s > 0
     layout = VariableLayout.of_problem(problem.n_states, len(problem.station_ids),
                                        fixed_stations=T_world_lh is not None,
                                        inertial=inertial is not None, diode_bias=bias,
-                                       sensor_offset=offset)
+                                       sensor_offset=offset, imu_calibration=calibrated)
     ev = FactorEvaluator(problem, layout, loss, options, T_world_lh, inertial)
     build = FactorBuilder(loss, options.sweep_offset_sigma_rad)
     graph = gtsam.NonlinearFactorGraph()
@@ -153,11 +159,21 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
         graph.add(build.motion(k, ev.motion_covariances[k], ev.motion_error(k)))
     ev.motion_factors = range(first, graph.size())
     if inertial is not None:
+        calibrated = layout.holds(IMU_CALIBRATION, 0)
+        gyro_noise = gtsam.noiseModel.Isotropic.Sigma(3, options.gyro_sigma_rad_s)
         for k in np.flatnonzero(inertial.rate_ok).tolist():
-            graph.add(gyro_factor(k, inertial.rate[k], options.gyro_sigma_rad_s))
+            graph.add(gtsam.CustomFactor(
+                gyro_noise, [BOARD_TWIST.key(k), IMU_BIAS.key(0), IMU_CALIBRATION.key(0)],
+                ev.gyro_error(k)) if calibrated
+                else gyro_factor(k, inertial.rate[k], options.gyro_sigma_rad_s))
         accel_noise = gtsam.noiseModel.Isotropic.Sigma(3, options.accel_sigma_mps2)
         for k in np.flatnonzero(inertial.force_ok).tolist():
-            graph.add(gtsam.CustomFactor(accel_noise, accel_keys(k), ev.accel_error(k)))
+            graph.add(gtsam.CustomFactor(accel_noise, accel_keys(k, calibrated),
+                                         ev.accel_error(k)))
+        if calibrated:
+            graph.add(gtsam.PriorFactorVector(
+                IMU_CALIBRATION.key(0), np.zeros(4),
+                gtsam.noiseModel.Diagonal.Sigmas(ev.imu.calibration_sigmas)))
         graph.add(gtsam.CustomFactor(
             gtsam.noiseModel.Isotropic.Sigma(1, GRAVITY_SIGMA_MPS2), [GRAVITY.key(0)],
             ev.gravity_error()))

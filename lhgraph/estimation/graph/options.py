@@ -64,10 +64,14 @@ class GraphOptions:
     factors (a gyro reading at a state's time; an accelerometer reading over a step, which
     also carries the vibration and the lever arm the model leaves out), used when an IMU
     stream is given (:mod:`lhgraph.estimation.inertial`), whose samples count within
-    ``imu_max_gap_s`` of a state; ``diode_bias_sigma_rad``: when positive, every station
-    sees every diode on each axis with a constant angle bias of this prior spread (variables
-    of the graph, :func:`~lhgraph.estimation.graph.variables.diode_bias_family`: the board's
-    geometry errors and the diodes' own delays, which repeat from sweep to sweep); 0: none;
+    ``imu_max_gap_s`` of a state; ``gyro_scale_sigma`` / ``imu_time_offset_sigma_s``: when
+    positive, the IMU's per-axis gyro scale error (the gyro reads ``(1 + s) omega``; the hive
+    tracker's reads ~0.48x) / its time offset to the light (s) are solved with this prior
+    spread (the variable family ``IMU calibration``); 0: not estimated;
+    ``diode_bias_sigma_rad``: when positive, every station sees every diode on each axis
+    with a constant angle bias of this prior spread (variables of the graph,
+    :func:`~lhgraph.estimation.graph.variables.diode_bias_family`: the board's geometry
+    errors and the diodes' own delays, which repeat from sweep to sweep); 0: none;
     ``sensor_offset_sigma_m``: when positive, a correction of every sensor's position is
     solved with this prior spread (:func:`~lhgraph.estimation.graph.variables.
     sensor_offset_family`); ``rest_keep_every``: where the board rests (still for 1 s or
@@ -109,6 +113,8 @@ class GraphOptions:
     gyro_sigma_rad_s: float = option(0.02, gt=0)
     accel_sigma_mps2: float = option(0.5, gt=0)
     imu_max_gap_s: float = option(0.05, gt=0)
+    gyro_scale_sigma: float = option(0.0, ge=0)
+    imu_time_offset_sigma_s: float = option(0.0, ge=0)
     diode_bias_sigma_rad: float = option(0.0, ge=0)
     sensor_offset_sigma_m: float = option(0.0, ge=0)
     rest_keep_every: int = option(1, ge=1)

@@ -15,9 +15,12 @@ sweep offset    ``o``   1    angle offset (rad) common to every diode of sweep k
 station pose    ``l``   6    ``T_world_lh`` of station slot s >= 1 (slot 0 is the world)
 IMU bias        ``i``   6    gyro (rad/s) and accelerometer (m/s^2) bias, board frame
 gravity         ``n``   3    gravity vector (m/s^2) in the world
+IMU calibration ``c``   4    per-axis gyro scale error and the IMU's time offset (s)
 ==============  ======  ===  ============================================================
 
-The last two exist only when the graph has IMU factors (:mod:`lhgraph.estimation.inertial`).
+The last three exist only when the graph has IMU factors (:mod:`lhgraph.estimation.inertial`),
+the calibration only when the options ask for it (``gyro_scale_sigma``,
+``imu_time_offset_sigma_s``).
 """
 
 from __future__ import annotations
@@ -78,6 +81,10 @@ IMU_BIAS = VariableFamily("IMU bias", "i", 6, False, "root", 1.0,
                           "gyro (rad/s) and accelerometer (m/s^2) bias, board frame")
 GRAVITY = VariableFamily("gravity", "n", 3, False, "root", 1.0,
                          "gravity vector (m/s^2) in the world")
+IMU_CALIBRATION = VariableFamily(
+    "IMU calibration", "c", 4, False, "root", 1.0,
+    "per-axis gyro scale error s (the gyro reads (1 + s) omega + bias) and the time offset "
+    "(s) at which the IMU is read on the light's clock (its stamps that much early)")
 
 
 DIODE_BIAS = "diode bias"
@@ -101,7 +108,8 @@ def sensor_offset_family(n_sensors: int) -> VariableFamily:
                           "correction (m, board frame) of every sensor's position")
 
 
-FAMILIES = (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE, IMU_BIAS, GRAVITY)
+FAMILIES = (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE, IMU_BIAS, GRAVITY,
+            IMU_CALIBRATION)
 """Every family the graph and the streaming smoother know."""
 
 
@@ -130,15 +138,19 @@ class VariableLayout:
     @classmethod
     def of_problem(cls, n_states: int, n_stations: int, fixed_stations: bool = False,
                    inertial: bool = False, diode_bias: VariableFamily | None = None,
-                   sensor_offset: VariableFamily | None = None) -> VariableLayout:
+                   sensor_offset: VariableFamily | None = None,
+                   imu_calibration: bool = False) -> VariableLayout:
         """The batch graph's layout: every family per board state ``0..n_states-1``, a station
         pose for slots ``1..n_stations-1`` (none with ``fixed_stations``: tracking, every
-        station held at a known pose), and with ``inertial`` one IMU bias and the gravity."""
+        station held at a known pose), with ``inertial`` one IMU bias and the gravity, and
+        with ``inertial`` and ``imu_calibration`` the IMU's calibration."""
         states = range(n_states)
         stations = range(0) if fixed_stations else range(1, n_stations)
         imu = range(1) if inertial else range(0)
         families = {BOARD_POSE: states, BOARD_TWIST: states, SWEEP_OFFSET: states,
                     STATION_POSE: stations, IMU_BIAS: imu, GRAVITY: imu}
+        if inertial and imu_calibration:
+            families[IMU_CALIBRATION] = range(1)
         if diode_bias is not None:
             families[diode_bias] = range(n_stations)
         if sensor_offset is not None:
@@ -251,6 +263,7 @@ def initial_values(layout: VariableLayout, init: Initialisation,
             raise ValueError("a layout with IMU variables needs the initial gravity")
         layout.insert(values, IMU_BIAS, np.zeros((1, 6)))
         layout.insert(values, GRAVITY, np.asarray(gravity, dtype=float)[None])
-    for family in filter(None, (layout.family(DIODE_BIAS), layout.family(SENSOR_OFFSET))):
+    for family in filter(None, (layout.family(DIODE_BIAS), layout.family(SENSOR_OFFSET),
+                                layout.family(IMU_CALIBRATION.name))):
         layout.insert(values, family, np.zeros((len(layout.indices(family)), family.dim)))
     return values
