@@ -106,7 +106,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
                      f"{int(inertial.rate_ok.sum())} states")
         light = fit
         fit, ev, cov = _optimise(problem, options, refined, progress, inertial,
-                                 initial_gravity(inertial, refined.X))
+                                 initial_gravity(inertial, refined.X), ev)
         fit = replace(fit, iterations=light.iterations + fit.iterations,
                       error_history=light.error_history + fit.error_history)
     timings["optimise"] = time.perf_counter() - t1
@@ -117,13 +117,18 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
 
 def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation,
               progress: Progress | None, inertial: InertialData | None = None,
-              gravity: Array | None = None
+              gravity: Array | None = None, levels: FactorEvaluator | None = None
               ) -> tuple[OptimizerResult, FactorEvaluator, dict[int, Array]]:
     """The graph of ``problem`` (with IMU factors if ``inertial``) optimised from ``init``
-    (and ``gravity``): the optimiser's result, the evaluator and the stations' marginal
-    covariances by slot."""
+    (and ``gravity``), its noise levels starting at those ``levels`` adapted to (a previous
+    stage's evaluator; default: the options'): the optimiser's result, the evaluator and the
+    stations' marginal covariances by slot."""
     graph, ev = build_graph(problem, options, inertial=inertial)
     values = initial_values(ev.layout, init, gravity)
+    if levels is not None:
+        ev.evaluate(values)
+        ev.scale_bearing_noise((levels.angle_sigma() / ev.angle_sigma()) ** 2)
+        ev.scale_motion_prior(levels.motion_psd_factor() / ev.motion_psd_factor())
     try:
         if options.solver == "lm":
             hook = (NoiseAdaptation(graph, ev, options, progress)

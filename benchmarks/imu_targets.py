@@ -1,0 +1,135 @@
+"""Issue #16's simulated IMU figures beside the deck's (``deck_imu.py``): the solve time with
+an IMU and fast against slow motion.
+
+    python3 benchmarks/imu_targets.py [--seeds 6] [--runs 5] [--jobs 2]
+        [--output docs/results/imu_targets.md]
+
+1. **Time**: the default 8 s capture (``configs/simulation/default.toml``, seed 1) with a
+   simulated 1 kHz IMU (``lhgraph.sim.imu`` defaults otherwise), written as files; the whole
+   ``lhgraph solve`` process (start-up, imports, files, solve, writing) with and without
+   ``--imu imu.csv``, ``--runs`` of each interleaved, medians and their ratio (target:
+   <= 1.5).
+2. **Fast against slow motion**: the default layout with the 1 kHz IMU, *slow* (0.5 m/s, the
+   board rocked by up to 20 deg) and *fast* (2.5 m/s, up to 45 deg: the rocking scales with
+   the speed, so the turns are ~5x faster too), ``--seeds`` captures each, solved without and
+   with the IMU: station 1's median position and rotation error, the mean NEES of its 6x6
+   covariance (expected 6), and the ratio fast / slow of the median position error with
+   the IMU (target: <= 1.5).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from joblib import Parallel, delayed
+
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.geometry.transforms import inverse, se3_log
+from lhgraph.io.files import check_writable
+from lhgraph.io.imu import save_imu
+from lhgraph.model.calibration import StationCalibration, save_calibration
+from lhgraph.sim.imu import ImuConfig
+from lhgraph.sim.simulate import load_simulation_config, simulate, write_simulation
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "configs/simulation/default.toml"
+IMU = ImuConfig(rate_hz=1000.0)
+MOTIONS = {"slow": (0.5, 20.0), "fast": (2.5, 45.0)}
+"""Family: (mean speed m/s, rocking amplitude deg)."""
+
+
+def config(speed_mps: float, rocking_deg: float):
+    base = load_simulation_config(CONFIG)
+    return dataclasses.replace(base, imu=IMU, motion=dataclasses.replace(
+        base.motion, speed_mps=speed_mps, rotation_amplitude_deg=rocking_deg))
+
+
+def whole_process_seconds(runs: int) -> tuple[float, float]:
+    """Median seconds of ``lhgraph solve`` without and with ``--imu`` (runs interleaved)."""
+    sim = simulate(config(*MOTIONS["slow"]), 1)
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        write_simulation(sim, d / "sim")
+        save_imu(sim.imu.stream, d / "imu.csv")
+        save_calibration({k: StationCalibration(s.model.calibration)
+                          for k, s in sim.truth.stations.items()}, d / "ootx.toml")
+        base = [sys.executable, "-m", "lhgraph", "solve", "--board", str(d / "sim/board.toml"),
+                "--angles", str(d / "sim/angles.csv"), "--calibration", str(d / "ootx.toml"),
+                "--output", str(d / "out.toml"), "--force", "--quiet"]
+        times: dict[bool, list[float]] = {False: [], True: []}
+        for _ in range(runs):
+            for with_imu in (False, True):
+                tic = time.perf_counter()
+                subprocess.run(base + (["--imu", str(d / "imu.csv")] if with_imu else []),
+                               check=True)
+                times[with_imu].append(time.perf_counter() - tic)
+    return statistics.median(times[False]), statistics.median(times[True])
+
+
+def errors(family: str, seed: int) -> dict:
+    """Station 1's errors and NEES without and with the IMU on one capture."""
+    sim = simulate(config(*MOTIONS[family]), seed)
+    models = {k: s.model for k, s in sim.truth.stations.items()}
+    truth = sim.truth.relative_to_reference().pose(1)
+    out = {"family": family, "seed": seed}
+    for name, imu in (("light", None), ("imu", sim.imu.stream)):
+        est = solve_graph(sim.board, sim.angles, models, imu=imu)
+        station = est.stations.relative_to_reference().stations[1]
+        xi = se3_log(inverse(truth) @ station.T_world_lh)
+        out[name] = (float(np.linalg.norm(station.T_world_lh[:3, 3] - truth[:3, 3])) * 1e3,
+                     float(np.degrees(np.linalg.norm(xi[:3]))),
+                     float(xi @ np.linalg.solve(station.covariance, xi)))
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=6)
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--output", type=Path, default=ROOT / "docs/results/imu_targets.md")
+    args = ap.parse_args()
+    check_writable(args.output, overwrite=True)
+    light_s, imu_s = whole_process_seconds(args.runs)
+    rows = Parallel(n_jobs=args.jobs)(delayed(errors)(f, s) for f in MOTIONS
+                                      for s in range(1, args.seeds + 1))
+    lines = ["# Simulated IMU figures: solve time, fast against slow motion", "",
+             f"Command: `python3 benchmarks/imu_targets.py --seeds {args.seeds} --runs "
+             f"{args.runs}`  ",
+             f"Machine: {platform.machine()}, Python {platform.python_version()}; "
+             f"{time.strftime('%Y-%m-%d')}. Default layout, 8 s, a simulated 1 kHz IMU.", "",
+             "## 1. Whole `lhgraph solve` process, seed 1", "",
+             f"- without `--imu`: median {light_s:.2f} s; with it: {imu_s:.2f} s "
+             f"(of {args.runs} runs each, interleaved): ratio **{imu_s / light_s:.2f}** "
+             "(target <= 1.5)", "",
+             "## 2. Station 1 by motion, without and with the IMU", "",
+             "| motion | captures | median position error mm, light / IMU | median rotation "
+             "error deg, light / IMU | mean NEES (6 dof), light / IMU |",
+             "|---|---|---|---|---|"]
+    medians = {}
+    for family, (speed, rock) in MOTIONS.items():
+        rs = [r for r in rows if r["family"] == family]
+        light, imu = (np.array([r[k] for r in rs]) for k in ("light", "imu"))
+        medians[family] = np.median(imu[:, 0])
+        lines.append(f"| {family} ({speed:g} m/s, {rock:g} deg) | {len(rs)} | "
+                     f"{np.median(light[:, 0]):.3f} / {np.median(imu[:, 0]):.3f} | "
+                     f"{np.median(light[:, 1]):.4f} / {np.median(imu[:, 1]):.4f} | "
+                     f"{np.mean(light[:, 2]):.1f} / {np.mean(imu[:, 2]):.1f} |")
+    lines += ["", f"Fast / slow, median position error with the IMU: "
+              f"**{medians['fast'] / medians['slow']:.2f}** (target <= 1.5)."]
+    args.output.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
