@@ -90,7 +90,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     angles, options, few = graph_preparation(angles, options, progress, models)
     problem = build_problem(board, angles, models, reference)
     if initialiser is None:
-        initialiser = FewDiodeInitialiser() if few else PnPKabschInitialiser()
+        initialiser = FewDiodeInitialiser() if few else PnPKabschInitialiser(imu=imu)
     init = initialiser(board, angles, problem)
     timings["initialise"] = time.perf_counter() - t0
     if progress:

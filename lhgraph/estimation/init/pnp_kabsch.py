@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
+from lhgraph.estimation.init.imu_bridge import bridged_relative_pose
 from lhgraph.estimation.init.pnp import PnPResult
 from lhgraph.estimation.init.twins import chosen_path, consistent_path, twin_path
 from lhgraph.estimation.problem import GraphProblem
@@ -20,6 +21,7 @@ from lhgraph.estimation.reconstruct import reconstruct_measurements
 from lhgraph.geometry.kabsch import weighted_kabsch
 from lhgraph.geometry.transforms import interpolate_poses, inverse, se3_log, transform_points
 from lhgraph.io.angles import Angles
+from lhgraph.io.imu import ImuStream
 from lhgraph.model.board import Board
 
 Array = NDArray[np.float64]
@@ -99,12 +101,13 @@ def _match_times(t_query: Array, t_ref: Array, max_gap_s: float) -> NDArray[np.b
 
 def initialise(board: Board, angles: Angles, problem: GraphProblem,
                max_gap_s: float = 0.05, velocity_span_s: float = 0.01,
-               pose_solver: PoseSolver | None = None, turn_sigma: float = 1.0
-               ) -> Initialisation:
+               pose_solver: PoseSolver | None = None, turn_sigma: float = 1.0,
+               imu: ImuStream | None = None) -> Initialisation:
     """Initial values from per-station PnP paths (:func:`station_paths`: the Viterbi's chain
     of planar twins, random walk ``turn_sigma`` rad/sqrt(s), or ``pose_solver`` per
     measurement) joined by weighted Kabsch on sensor points over the stations' overlap tree
-    (:func:`join_paths`); twists from the merged path's change over ``velocity_span_s``.
+    (:func:`join_paths`, bridged by ``imu`` where two stations never see the board at once);
+    twists from the merged path's change over ``velocity_span_s``.
 
     LH2 stations (default pose solver): the twins from the ideal LH1-equivalent angles
     (:func:`~lhgraph.estimation.init.twins.twin_path` with ``ideal_lh1``), and the twists
@@ -121,7 +124,7 @@ def initialise(board: Board, angles: Angles, problem: GraphProblem,
         paths = station_paths(board, angles, problem, pose_solver, turn_sigma)
     parents: list[int] = []
     matches = pair_matches(paths, max_gap_s)
-    L0, overlap = join_paths(board, problem, paths, max_gap_s, parents, matches)
+    L0, overlap = join_paths(board, problem, paths, max_gap_s, parents, matches, imu)
     X0, V0 = world_states(paths, L0, problem.state_time, velocity_span_s, lh2)
     return Initialisation(L0, X0, V0, overlap, parents, matches)
 
@@ -190,7 +193,8 @@ def relative_pose(board: Board, parent: tuple[Array, Array, Array],
 
 def join_paths(board: Board, problem: GraphProblem, paths: list[tuple[Array, Array, Array]],
                max_gap_s: float = 0.05, parents: list[int] | None = None,
-               matches: NDArray[np.int64] | None = None) -> tuple[Array, list[int]]:
+               matches: NDArray[np.int64] | None = None, imu: ImuStream | None = None
+               ) -> tuple[Array, list[int]]:
     """Station poses ``T_world_lh`` (S, 4, 4) (slot 0 = identity) from every slot's path
     ``(times, T_lh_board, rms_rad)``, and the time-matched pairs of each slot's join.
 
@@ -201,7 +205,11 @@ def join_paths(board: Board, problem: GraphProblem, paths: list[tuple[Array, Arr
     chains of stations that saw it at the same moments (a room where each station overlaps
     only its neighbours). Each link is :func:`relative_pose`; ``T_world_lh`` of a station
     is its parent's times the link. ``matches``: the paths' :func:`pair_matches` when the
-    caller has them already."""
+    caller has them already. ``imu``: the receiver's IMU stream (board frame, the paths'
+    clock); a station no placed station saw the board with at the same moments is then
+    joined to the reference through it (:func:`~lhgraph.estimation.init.imu_bridge.
+    bridged_relative_pose`: moments up to 0.6 s apart bridged by dead reckoning; its overlap
+    counts 0)."""
     t_ref = paths[0][0]
     if len(t_ref) < 2:
         raise SolverError(f"station {problem.station_ids[0]} (reference): too few usable "
@@ -209,6 +217,12 @@ def join_paths(board: Board, problem: GraphProblem, paths: list[tuple[Array, Arr
     S = len(problem.station_ids)
     M = pair_matches(paths, max_gap_s) if matches is None else matches
     tree = overlap_tree(M)
+    bridged = {}
+    for c in [c for c in range(S) if tree[c] < 0 and imu is not None]:
+        link = bridged_relative_pose(board, paths[0], paths[c], imu)
+        if link is not None:
+            bridged[c] = link
+            tree[c] = 0
     missing = [c for c in range(S) if tree[c] < 0]
     if missing:
         ids = problem.station_ids
@@ -231,7 +245,10 @@ def join_paths(board: Board, problem: GraphProblem, paths: list[tuple[Array, Arr
     while len(done) < S:  # parents before children
         for c in range(1, S):
             if c not in done and tree[c] in done:
-                L0[c] = L0[tree[c]] @ relative_pose(board, paths[tree[c]], paths[c], max_gap_s)
+                link = bridged.get(c)
+                if link is None:
+                    link = relative_pose(board, paths[tree[c]], paths[c], max_gap_s)
+                L0[c] = L0[tree[c]] @ link
                 done.add(c)
     return L0, overlap
 
@@ -281,12 +298,15 @@ class PnPKabschInitialiser:
     board poses by default both planar twins of every measurement and the temporally
     consistent chain of them; with ``pose_solver`` its pose per measurement
     (:func:`lhgraph.estimation.init.pnp.board_poses`: the better-fitting twin each time;
-    :func:`lhgraph.estimation.init.pnp_nonplanar.tracker_board_poses` for curved boards)."""
+    :func:`lhgraph.estimation.init.pnp_nonplanar.tracker_board_poses` for curved boards);
+    ``imu``: the receiver's IMU stream, which joins stations that never see the board at the
+    same moments (:func:`join_paths`)."""
 
     pose_solver: PoseSolver | None = None
     max_gap_s: float = 0.05
     velocity_span_s: float = 0.01
+    imu: ImuStream | None = None
 
     def __call__(self, board: Board, angles: Angles, problem: GraphProblem) -> Initialisation:
         return initialise(board, angles, problem, self.max_gap_s, self.velocity_span_s,
-                          self.pose_solver)
+                          self.pose_solver, imu=self.imu)
