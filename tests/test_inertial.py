@@ -363,3 +363,50 @@ def test_facing_stations_with_a_one_sided_board_join_through_the_imu():
     result = solve_graph(sim.board, sim.angles, models, imu=sim.imu.stream)
     error = station_errors(sim.truth, result.stations)[0]
     assert error.position_norm_m < 5e-3 and np.degrees(error.rotation_rad) < 0.3
+
+
+def test_preintegrated_gyro_jacobians_match_numerical(miscalibrated_imu):
+    # the preintegrated gyro factors' Jacobians (both poses' rotations, the gyro bias)
+    # against central differences of their residuals, at a point off the solution
+    import gtsam
+
+    from lhgraph.estimation.graph.factors import build_graph
+    from lhgraph.estimation.graph.options import GraphOptions
+    from lhgraph.estimation.graph.variables import BOARD_POSE, IMU_BIAS, initial_values
+    from lhgraph.estimation.inertial import initial_gravity
+    from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
+    from lhgraph.estimation.problem import build_problem
+
+    sim = miscalibrated_imu
+    problem = build_problem(sim.board, sim.angles, {}, 0)
+    data = inertial_data(sim.imu.stream, problem.state_time)
+    graph, ev = build_graph(problem, GraphOptions(), inertial=data)
+    init = PnPKabschInitialiser()(sim.board, sim.angles, problem)
+    values = initial_values(ev.layout, init, initial_gravity(data, init.X))
+    values.update(IMU_BIAS.key(0), np.array([0.02, -0.01, 0.03, 0.0, 0.0, 0.0]))
+    ev.evaluate(values)
+    ev._jacobians()
+    H0, H1, Hb = (H.copy() for H in ev.imu.Hp)
+    steps = ev.imu.preintegrated
+    assert len(steps) > 0.9 * problem.n_states
+    h = 1e-6
+    for i in range(0, len(steps), 40):
+        k = int(steps[i])
+        for key, H in ((BOARD_POSE.key(k), H0), (BOARD_POSE.key(k + 1), H1),
+                       (IMU_BIAS.key(0), Hb)):
+            num = np.zeros((3, 6))
+            for j in range(6):
+                out = []
+                for sign in (1, -1):
+                    v = gtsam.Values(values)
+                    d = np.zeros(6)
+                    d[j] = sign * h
+                    if key == IMU_BIAS.key(0):
+                        v.update(key, values.atVector(key) + d)
+                    else:
+                        v.update(key, values.atPose3(key).retract(d))
+                    ev.evaluate(v)
+                    out.append(ev.imu.p[i].copy())
+                num[:, j] = (out[0] - out[1]) / (2 * h)
+            np.testing.assert_allclose(H[i], num, atol=1e-5)
+    ev.evaluate(values)

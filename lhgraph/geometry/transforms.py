@@ -52,6 +52,24 @@ def so3_exp(omega: ArrayLike) -> Array:
     return np.eye(3) + a * W + b * (W @ W)
 
 
+def so3_right_jacobian(phi: ArrayLike, inverse: bool = False) -> Array:
+    """SO(3) right Jacobians ``J_r(phi)`` ``(..., 3, 3)`` of rotation vectors ``(..., 3)``
+    (``Exp(phi + d) = Exp(phi) Exp(J_r(phi) d)`` to first order), or their inverses
+    (``Log(Exp(phi) Exp(d)) = phi + J_r(phi)^-1 d``); closed forms, series near 0."""
+    phi = np.asarray(phi, dtype=float)
+    theta = np.linalg.norm(phi, axis=-1)[..., None, None]
+    small = theta < 1e-4
+    th = np.where(small, 1.0, theta)
+    W = skew(phi)
+    if inverse:
+        c = np.where(small, 1.0 / 12.0,
+                     1.0 / th**2 - (1.0 + np.cos(th)) / (2.0 * th * np.sin(th)))
+        return np.eye(3) + 0.5 * W + c * (W @ W)
+    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(th)) / th**2)
+    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (th - np.sin(th)) / th**3)
+    return np.eye(3) - a * W + b * (W @ W)
+
+
 def so3_log(R: ArrayLike) -> Array:
     """Rotation vectors ``(..., 3)`` (rad) of rotation matrices ``(..., 3, 3)``.
 

@@ -240,6 +240,22 @@ class FactorEvaluator:
 
         return error
 
+    def preintegration_error(self, i: int) -> FactorError:
+        """Callback of the i-th preintegrated gyro factor (step ``k = imu.preintegrated[i]``;
+        keys: pose k, pose k + 1, IMU bias)."""
+        k = int(self.imu.preintegrated[i])
+
+        def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
+            self._ensure(values, k, None)
+            self._ensure(values, k + 1, None)
+            if H is not None:
+                self._jacobians()
+                for j, H_j in enumerate(self.imu.Hp):
+                    H[j] = H_j[i]
+            return self.imu.p[i]
+
+        return error
+
     def motion_error(self, k: int) -> FactorError:
         """Callback of the motion prior between states k and k + 1."""
         return self._step_callback(k, lambda: self._e, lambda: self._He)

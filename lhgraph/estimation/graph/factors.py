@@ -15,8 +15,10 @@
    state's twist and the IMU bias (linear: GTSAM's ``LinearContainerFactor``, no Python
    callback; with the IMU calibration, ``gyro_scale_sigma`` / ``imu_time_offset_sigma_s``,
    a callback on the twist, the bias and the calibration), an **accelerometer factor** over
-   every step, keys :func:`accel_keys`, one factor on the gravity's magnitude and, with the
-   calibration, its zero-mean prior.
+   every step, keys :func:`accel_keys`, with ``gyro_preintegration`` a **preintegrated gyro
+   factor** over every step on both poses and the IMU bias
+   (:mod:`lhgraph.estimation.graph.imu_terms`), one factor on the gravity's magnitude and,
+   with the calibration, its zero-mean prior.
 
 The residuals come from :mod:`lhgraph.estimation.residuals`; who evaluates them is the
 caller's choice (the batch graph's vectorised :class:`FactorEvaluator`, the streaming
@@ -170,6 +172,13 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
         for k in np.flatnonzero(inertial.force_ok).tolist():
             graph.add(gtsam.CustomFactor(accel_noise, accel_keys(k, calibrated),
                                          ev.accel_error(k)))
+        for i, (k, sigma) in enumerate(zip(ev.imu.preintegrated.tolist(),
+                                           ev.imu.preintegration_sigmas.tolist()
+                                           if len(ev.imu.preintegrated) else [],
+                                           strict=True)):
+            graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(3, sigma),
+                                         [BOARD_POSE.key(k), BOARD_POSE.key(k + 1),
+                                          IMU_BIAS.key(0)], ev.preintegration_error(i)))
         if calibrated:
             graph.add(gtsam.PriorFactorVector(
                 IMU_CALIBRATION.key(0), np.zeros(4),

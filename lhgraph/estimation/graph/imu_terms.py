@@ -6,6 +6,16 @@ Variables read: the IMU bias ``I(0)``, the gravity ``N(0)`` and, when the option
 the IMU calibration ``C(0)`` (per-axis gyro scale error ``s``, time offset ``tau``): the gyro
 residual is then ``(1 + s) omega_k + b_gyro - gyro(t_k + tau)`` and the accelerometer is read
 at each step's middle ``+ tau``.
+
+**Preintegrated gyro** (``gyro_preintegration``): over every step k -> k + 1 the gyro's
+readings between the two states, bias-corrected (and scaled, offset), integrated into the
+rotation ``dR_k`` (at the IMU's own rate, in sub-steps of at most one sample period); the
+residual is ``Log(dR_k^T R_k^T R_k+1)`` (3, rad), its noise ``gyro_sigma_rad_s`` per reading
+integrated over the step, ``sigma sqrt(dt / rate)``. It uses every reading, where the gyro
+factor reads one per state: across a turn that no station sees (no states for a third of a
+second) it ties the rotation on both sides. Jacobians: the two poses' rotations and the gyro
+bias (first order, ``d dR / d b`` accumulated with the product); the calibration is held at
+its current value in them.
 """
 
 from __future__ import annotations
@@ -23,9 +33,13 @@ from lhgraph.estimation.graph.variables import (
 )
 from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, InertialData
 from lhgraph.estimation.residuals import accel_residuals, gyro_residuals
+from lhgraph.geometry.transforms import so3_exp, so3_log, so3_right_jacobian
 from lhgraph.io.imu import STANDARD_GRAVITY_MPS2
 
 Array = NDArray[np.float64]
+MAX_SUBSTEPS = 2000
+"""Sub-steps of one preintegrated step at most (a step longer than this many IMU periods is
+integrated in longer sub-steps)."""
 FIXED_CALIBRATION_SIGMA = 1e-7
 """Prior spread of an IMU calibration component the options do not ask for (a gyro scale of
 0.1 ppm, a time offset of 0.1 us): held at zero."""
@@ -48,6 +62,12 @@ class ImuTerms:
         """Prior spread of the calibration's components (an unasked one is held at 0)."""
         self.imu = np.zeros(9)  # IMU bias (gyro, accelerometer), gravity
         self.C = np.zeros(4)  # gyro scale error (3), time offset (s)
+        self.preintegrated = (np.zeros(0, dtype=np.int64) if not options.gyro_preintegration
+                              else np.flatnonzero(data.rate_ok[:-1] & data.rate_ok[1:]
+                                                  & (data.dt > 0)))
+        """Steps k (k -> k + 1) with a preintegrated gyro factor."""
+        if len(self.preintegrated):
+            self._substeps(options.gyro_sigma_rad_s)
 
     def matches(self, values: gtsam.Values) -> bool:
         """Whether ``values`` hold the IMU variables of the last :meth:`read`."""
@@ -68,6 +88,46 @@ class ImuTerms:
         self._X, self._W = X, W
         self.g = gyro_residuals(W * np.r_[1.0 + self.C[:3], np.ones(3)], self.imu[:3], rate)
         self.a = self._accel(False)[0]
+        if len(self.preintegrated):
+            self._preintegrate()
+
+    def _substeps(self, sigma_rad_s: float) -> None:
+        """The preintegration's sub-step grid: per preintegrated step its sub-step length
+        ``_h`` (s), the sub-steps' middle times ``_grid`` (n, M) and mask ``_inside``, and
+        each step's noise ``preintegration_sigmas`` (rad)."""
+        d, k = self.data, self.preintegrated
+        period = float(np.median(np.diff(d.stream.time)))
+        dt = d.dt[k]
+        n = np.clip(np.ceil(dt / period).astype(int), 1, MAX_SUBSTEPS)
+        self._h = dt / n
+        m = np.arange(int(n.max()))
+        self._inside = m[None] < n[:, None]
+        self._grid = d.state_time[k][:, None] + (np.minimum(m[None], n[:, None] - 1) + 0.5) \
+            * self._h[:, None]
+        self.preintegration_sigmas = sigma_rad_s * np.sqrt(dt * period)
+
+    def _preintegrate(self) -> None:
+        """``_dR`` (n, 3, 3) and ``_J_bias`` (n, 3, 3: d Log(dR) / d gyro bias) of every
+        preintegrated step at the current bias and calibration, and the residuals ``p``."""
+        s = self.data.stream
+        t = self._grid + self.C[3]
+        gyro = np.stack([np.interp(t, s.time, s.gyro_rad_s[:, j]) for j in range(3)], axis=-1)
+        omega = (gyro - self.imu[:3]) / (1.0 + self.C[:3])
+        n = len(self.preintegrated)
+        dR = np.repeat(np.eye(3)[None], n, axis=0)
+        J = np.zeros((n, 3, 3))
+        for m in range(omega.shape[1]):
+            phi = omega[:, m] * (self._h * self._inside[:, m])[:, None]
+            E = so3_exp(phi)
+            # d omega / d b = -1 / (1 + s): the bias enters every sub-step's rate
+            Jb = -so3_right_jacobian(phi) * (self._h * self._inside[:, m])[:, None, None] \
+                / (1.0 + self.C[:3])[None, None, :]
+            J = np.swapaxes(E, 1, 2) @ J + Jb
+            dR = dR @ E
+        self._dR, self._J_bias = dR, J
+        k = self.preintegrated
+        R0, R1 = self._X[k, :3, :3], self._X[k + 1, :3, :3]
+        self.p = so3_log(np.swapaxes(dR, 1, 2) @ np.swapaxes(R0, 1, 2) @ R1)
 
     def jacobians(self) -> None:
         """``Hg`` and ``Ha`` at the point of the last :meth:`read`."""
@@ -75,6 +135,8 @@ class ImuTerms:
         H_bias = np.zeros((len(Ha[4]), 3, 6))
         H_bias[:, :, 3:] = Ha[4]
         self.Ha = (*Ha[:4], H_bias, Ha[5])
+        if len(self.preintegrated):
+            self._preintegration_jacobians()
         if self.calibration is None:
             return
         K = len(self._W)
@@ -91,6 +153,19 @@ class ImuTerms:
                                           self._force_slope)
         self.Ha = (*self.Ha, H_accel_cal)
 
+    def _preintegration_jacobians(self) -> None:
+        """``Hp``: the preintegrated factors' Jacobians (pose k, pose k + 1, IMU bias), each
+        (n, 3, 6): ``r = Log(dR^T R_k^T R_k+1)`` moves by ``-J_l^-1(r) dR^T`` with pose k's
+        rotation, ``J_r^-1(r)`` with pose k + 1's and ``-J_l^-1(r) J_bias`` with the gyro
+        bias (``J_l^-1(r) = J_r^-1(-r)``)."""
+        n = len(self.preintegrated)
+        Jl_inv = so3_right_jacobian(-self.p, inverse=True)
+        H0, H1, Hb = (np.zeros((n, 3, 6)) for _ in range(3))
+        H0[:, :, :3] = -Jl_inv @ np.swapaxes(self._dR, 1, 2)
+        H1[:, :, :3] = so3_right_jacobian(self.p, inverse=True)
+        Hb[:, :, :3] = -Jl_inv @ self._J_bias
+        self.Hp = (H0, H1, Hb)
+
     def cost(self) -> float:
         """Half the squared whitened gyro, accelerometer, gravity-magnitude and calibration
         prior residuals (what the IMU factors add to ``graph.error``)."""
@@ -99,7 +174,10 @@ class ImuTerms:
         a = self.a[d.force_ok] / self.accel_sigma
         m = (np.linalg.norm(self.imu[6:]) - STANDARD_GRAVITY_MPS2) / GRAVITY_SIGMA_MPS2
         c = self.C / self.calibration_sigmas if self.calibration is not None else np.zeros(0)
-        return 0.5 * float(np.sum(g * g) + np.sum(a * a) + m * m + np.sum(c * c))
+        p = (self.p / self.preintegration_sigmas[:, None] if len(self.preintegrated)
+             else np.zeros(0))
+        return 0.5 * float(np.sum(g * g) + np.sum(a * a) + m * m + np.sum(c * c)
+                           + np.sum(p * p))
 
     def residuals(self) -> tuple[Array, Array]:
         """Gyro (K, 3) and accelerometer (K - 1, 3) residuals, NaN where the IMU has no

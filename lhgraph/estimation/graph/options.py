@@ -64,7 +64,10 @@ class GraphOptions:
     factors (a gyro reading at a state's time; an accelerometer reading over a step, which
     also carries the vibration and the lever arm the model leaves out), used when an IMU
     stream is given (:mod:`lhgraph.estimation.inertial`), whose samples count within
-    ``imu_max_gap_s`` of a state; ``gyro_scale_sigma`` / ``imu_time_offset_sigma_s``: when
+    ``imu_max_gap_s`` of a state; ``gyro_preintegration``: also a factor per step on the
+    rotation the gyro's readings between the two states integrate to
+    (:mod:`lhgraph.estimation.graph.imu_terms`); ``gyro_scale_sigma`` /
+    ``imu_time_offset_sigma_s``: when
     positive, the IMU's per-axis gyro scale error (the gyro reads ``(1 + s) omega``; the hive
     tracker's reads ~0.48x) / its time offset to the light (s) are solved with this prior
     spread (the variable family ``IMU calibration``); 0: not estimated;
@@ -113,6 +116,7 @@ class GraphOptions:
     gyro_sigma_rad_s: float = option(0.02, gt=0)
     accel_sigma_mps2: float = option(0.5, gt=0)
     imu_max_gap_s: float = option(0.05, gt=0)
+    gyro_preintegration: bool = option(True)
     gyro_scale_sigma: float = option(0.0, ge=0)
     imu_time_offset_sigma_s: float = option(0.0, ge=0)
     diode_bias_sigma_rad: float = option(0.0, ge=0)

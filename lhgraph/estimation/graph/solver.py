@@ -48,6 +48,10 @@ FEW_DIODES = 5
 """The default initialiser's PnP needs this many diodes with both angles per measurement."""
 FEW_DIODE_STEP_QUANTILE = 0.95
 """The board-step quantile of the stopping rule on few-diode data (GraphOptions)."""
+IMU_DISAGREEMENT = 1.5
+"""The IMU refinement warns when it raises the light's median absolute residual by more than
+this factor (on the hive recording with its gyro taken as read, 0.48x the true rate: 47 ->
+527 urad; a simulated gyro reading 0.5x: 1.28x; consistent simulated IMUs 1.02-1.10x)."""
 
 
 def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | None = None,
@@ -97,6 +101,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         progress(f"initialised {problem.n_states} board states, {len(problem.hits.angle)} hits")
     t1 = time.perf_counter()
     fit, ev, cov = _optimise(problem, options, init, progress)
+    notes = []
     if imu is not None:
         inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
         refined = Initialisation(ev.station_poses().copy(), ev.board_poses().copy(),
@@ -105,14 +110,23 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
             progress(f"refining with the IMU: gyro and accelerometer factors at "
                      f"{int(inertial.rate_ok.sum())} states")
         light = fit
+        light_median = _median_residual(ev, light.values)
         fit, ev, cov = _optimise(problem, options, refined, progress, inertial,
                                  initial_gravity(inertial, refined.X), ev)
+        imu_median = _median_residual(ev, fit.values)
+        if imu_median > IMU_DISAGREEMENT * light_median:
+            notes.append(f"the IMU disagrees with the light: its factors raised the median "
+                         f"angle residual from {light_median * 1e6:.0f} to "
+                         f"{imu_median * 1e6:.0f} urad (a gyro scale error or time offset? "
+                         "solve them with gyro_scale_sigma / imu_time_offset_sigma_s; or "
+                         "the IMU's frame is not the board's)")
         fit = replace(fit, iterations=light.iterations + fit.iterations,
                       error_history=light.error_history + fit.error_history)
     timings["optimise"] = time.perf_counter() - t1
     ev.evaluate(fit.values)
     extra = {} if rests is None else {"rest_hits_dropped": float(rests.hits_dropped)}
-    return _result(angles, problem, ev, fit, cov, options, timings, t0, init.parents, extra)
+    return _result(angles, problem, ev, fit, cov, options, timings, t0, init.parents, extra,
+                   notes)
 
 
 def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation,
@@ -184,6 +198,12 @@ def graph_preparation(angles: Angles, options: GraphOptions,
     return angles, options, few
 
 
+def _median_residual(ev: FactorEvaluator, values) -> float:
+    """Median absolute angle residual (rad) of ``ev``'s hits at ``values``."""
+    ev.evaluate(values)
+    return float(np.median(np.abs(ev.bearing_residuals())))
+
+
 def _chain(slot: int, parents: list[int]) -> list[int]:
     """Slots from ``slot`` to the reference (slot 0) along ``parents`` (``[slot, 0]`` when
     the parents are not known)."""
@@ -200,17 +220,17 @@ def few_diode(angles: Angles) -> bool:
 
 def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: OptimizerResult,
             cov: dict[int, Array], options: GraphOptions, timings: dict[str, float], t0: float,
-            parents: list[int] | None = None, diagnostics: dict[str, float] | None = None
-            ) -> SolveResult:
+            parents: list[int] | None = None, diagnostics: dict[str, float] | None = None,
+            notes: list[str] | None = None) -> SolveResult:
     """The :class:`SolveResult` of a finished solve, ``ev`` evaluated at the result;
     ``parents``: the slot each station's initial pose was joined to (the initialiser's
     overlap tree), for the weak-link warning; ``diagnostics``: figures of the solve's own
-    stages, added to the evaluator's."""
+    stages, added to the evaluator's; ``notes``: warnings of the solve's own stages."""
     reference = problem.station_ids[0]
     poses = ev.station_poses()
     out: dict[int, Station] = {reference: Station(np.eye(4), np.zeros((6, 6)),
                                                   problem.models[0])}
-    warnings = []
+    warnings = list(notes or [])
     for slot in range(1, len(problem.station_ids)):
         sid = problem.station_ids[slot]
         out[sid] = Station(poses[slot].copy(), cov[slot], problem.models[slot])
