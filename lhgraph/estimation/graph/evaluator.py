@@ -230,40 +230,22 @@ class FactorEvaluator:
     def gyro_error(self, k: int) -> FactorError:
         """Callback of state k's gyro factor with the IMU calibration (keys: twist k, IMU
         bias, calibration): ``(1 + s) omega_k + gyro bias - gyro(t_k + offset)``."""
-        def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
-            self._ensure(values, k, None)
-            if H is not None:
-                self._jacobians()
-                for j, H_j in enumerate(self.imu.Hg):
-                    H[j] = H_j[k]
-            return self.imu.g[k]
-
-        return error
+        return self._callback((k,), k, lambda: self.imu.g, lambda: self.imu.Hg)
 
     def preintegration_error(self, i: int) -> FactorError:
         """Callback of the i-th preintegrated gyro factor (step ``k = imu.preintegrated[i]``;
         keys: pose k, pose k + 1, IMU bias)."""
         k = int(self.imu.preintegrated[i])
-
-        def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
-            self._ensure(values, k, None)
-            self._ensure(values, k + 1, None)
-            if H is not None:
-                self._jacobians()
-                for j, H_j in enumerate(self.imu.Hp):
-                    H[j] = H_j[i]
-            return self.imu.p[i]
-
-        return error
+        return self._callback((k, k + 1), i, lambda: self.imu.p, lambda: self.imu.Hp)
 
     def motion_error(self, k: int) -> FactorError:
         """Callback of the motion prior between states k and k + 1."""
-        return self._step_callback(k, lambda: self._e, lambda: self._He)
+        return self._callback((k, k + 1), k, lambda: self._e, lambda: self._He)
 
     def accel_error(self, k: int) -> FactorError:
         """Callback of the accelerometer factor over the step from state k to k + 1 (keys as
         in :func:`lhgraph.estimation.graph.factors.accel_keys`)."""
-        return self._step_callback(k, lambda: self.imu.a, lambda: self.imu.Ha)
+        return self._callback((k, k + 1), k, lambda: self.imu.a, lambda: self.imu.Ha)
 
     def gravity_error(self) -> FactorError:
         """Callback of the gravity-magnitude factor: ``|g| - STANDARD_GRAVITY_MPS2`` (m/s^2); with
@@ -300,18 +282,19 @@ class FactorEvaluator:
 
     # --- internals ------------------------------------------------------------------------
 
-    def _step_callback(self, k: int, residuals: Callable[[], Array],
-                       jacobians: Callable[[], tuple[Array, ...]]) -> FactorError:
-        """Callback of a factor between states k and k + 1 whose residual and Jacobians are
-        row k of the arrays ``residuals()`` and ``jacobians()`` give once evaluated."""
+    def _callback(self, states: tuple[int, ...], row: int, residuals: Callable[[], Array],
+                  jacobians: Callable[[], tuple[Array, ...]]) -> FactorError:
+        """Callback of a factor on board ``states`` (and root variables) whose residual and
+        Jacobians are ``row`` of the arrays ``residuals()`` and ``jacobians()`` give once
+        evaluated."""
         def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
-            self._ensure(values, k, None)
-            self._ensure(values, k + 1, None)
+            for k in states:
+                self._ensure(values, k, None)
             if H is not None:
                 self._jacobians()
                 for j, H_j in enumerate(jacobians()):
-                    H[j] = H_j[k]
-            return residuals()[k]
+                    H[j] = H_j[row]
+            return residuals()[row]
 
         return error
 
