@@ -236,13 +236,15 @@ def test_real_crazyflie_imu_fits_the_light(tmp_path):
 @pytest.fixture(scope="module")
 def miscalibrated_imu():
     """An 8 s capture of the default board with an IMU whose gyro reads 0.5 / 0.47 / 0.52 of
-    the rate (the hive tracker's reads ~0.48) and whose stamps run 6 ms late."""
+    the rate (the hive tracker's reads ~0.48), whose stamps run 6 ms late and whose frame is
+    turned by 1.6 deg from the board's."""
     from lhgraph.sim.imu import ImuConfig
 
     config = dataclasses.replace(
         load_simulation_config("configs/simulation/default.toml"),
         imu=ImuConfig(gyro_scale_x=0.5, gyro_scale_y=0.47, gyro_scale_z=0.52,
-                      time_offset_s=0.006))
+                      time_offset_s=0.006, rotation_x_rad=0.02, rotation_y_rad=-0.015,
+                      rotation_z_rad=0.01))
     return simulate(config, 1)
 
 
@@ -257,12 +259,15 @@ def test_gyro_scale_and_time_offset_are_solved(miscalibrated_imu):
     models = {k: s.model for k, s in sim.truth.stations.items()}
     as_read = solve_graph(sim.board, sim.angles, models, imu=sim.imu.stream)
     solved = solve_graph(sim.board, sim.angles, models,
-                         GraphOptions(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02),
+                         GraphOptions(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
+                                      imu_rotation_sigma_rad=0.1),
                          imu=sim.imu.stream)
     d = solved.diagnostics
     np.testing.assert_allclose([d["gyro_scale_x"], d["gyro_scale_y"], d["gyro_scale_z"]],
                                [0.5, 0.47, 0.52], rtol=0.02)
     assert d["imu_time_offset_s"] == pytest.approx(0.006, abs=1.5e-3)
+    assert np.radians(d["imu_rotation_deg"]) == pytest.approx(
+        np.linalg.norm([0.02, -0.015, 0.01]), abs=3e-3)
     assert "gyro_scale_x" not in as_read.diagnostics
     error = {name: station_errors(sim.truth, r.stations)[0].position_norm_m
              for name, r in (("as read", as_read), ("solved", solved))}
@@ -281,14 +286,15 @@ def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
     from lhgraph.estimation.problem import build_problem
 
     sim = miscalibrated_imu
-    options = GraphOptions(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02)
+    options = GraphOptions(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
+                           imu_rotation_sigma_rad=0.1)
     problem = build_problem(sim.board, sim.angles, {}, 0)
     data = inertial_data(sim.imu.stream, problem.state_time)
     graph, ev = build_graph(problem, options, inertial=data)
     init = PnPKabschInitialiser()(sim.board, sim.angles, problem)
     values = initial_values(ev.layout, init, initial_gravity(data, init.X))
     key = IMU_CALIBRATION.key(0)
-    c0 = np.array([-0.4, 0.1, 0.05, 0.003])
+    c0 = np.array([-0.4, 0.1, 0.05, 0.003, 0.02, -0.01, 0.015])
     values.update(key, c0)
     lin = graph.linearize(values)
     gyro_rows, accel_rows = [], []
@@ -299,12 +305,12 @@ def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
         elif keys[-1] == key and len(keys) > 3:
             accel_rows.append(i)
     assert len(gyro_rows) == int(data.rate_ok.sum()) and len(accel_rows) > 0
-    h = np.array([1e-6, 1e-6, 1e-6, 1e-7])
+    h = np.array([1e-6, 1e-6, 1e-6, 1e-7, 1e-6, 1e-6, 1e-6])
     numerical = []
-    for j in range(4):
+    for j in range(7):
         residuals = []
         for sign in (1, -1):
-            v = gtsam_values_with(values, key, c0 + sign * h[j] * np.eye(4)[j])
+            v = gtsam_values_with(values, key, c0 + sign * h[j] * np.eye(7)[j])
             ev.evaluate(v)
             residuals.append(ev.inertial_residuals())
         numerical.append([(p - m) / (2 * h[j]) for p, m in zip(*residuals, strict=True)])
@@ -313,8 +319,8 @@ def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
                                (accel_rows, 1, options.accel_sigma_mps2)):
         states = np.flatnonzero(data.rate_ok if which == 0 else data.force_ok)
         for i, k in zip(rows[::25], states[::25], strict=False):
-            A = lin.at(i).getA()[:, -4:] * sigma  # unwhitened
-            num = np.stack([numerical[j][which][k] for j in range(4)], axis=1)
+            A = lin.at(i).getA()[:, -7:] * sigma  # unwhitened
+            num = np.stack([numerical[j][which][k] for j in range(7)], axis=1)
             np.testing.assert_allclose(A, num, atol=1e-4 * max(1.0, np.abs(num).max()))
 
 

@@ -8,8 +8,9 @@ default noise is of the order of a small MEMS part's at 100 Hz, such as the Craz
 BMI088 (gyro ~0.1 deg/s, accelerometer ~0.02 m/s^2 per sample); the biases are drawn with
 standard deviations 0.005 rad/s and 0.05 m/s^2. No bias random walk, no lever arm; a gyro
 scale per axis (``gyro_scale_x``/``_y``/``_z``: the gyro reads that times the rate; the hive
-tracker's reads ~0.48) and a stamp delay (``time_offset_s``: a reading of the motion at T
-is stamped T + offset) when asked. A simulation config asks for a stream with an ``[imu]`` table
+tracker's reads ~0.48), a stamp delay (``time_offset_s``: a reading of the motion at T
+is stamped T + offset) and a rotation of the IMU's frame (``rotation_x_rad``/``_y``/``_z``)
+when asked. A simulation config asks for a stream with an ``[imu]`` table
 (:class:`ImuConfig`, docs/simulator.md); ``lhgraph simulate`` then writes ``imu.csv``.
 """
 
@@ -22,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lhgraph.config import check_fields, option
-from lhgraph.geometry.transforms import so3_log
+from lhgraph.geometry.transforms import so3_exp, so3_log
 from lhgraph.io.imu import STANDARD_GRAVITY_MPS2, ImuStream
 from lhgraph.sim.motion import Motion
 
@@ -37,8 +38,10 @@ DIFF_STEP_S = 1e-4
 @dataclass(frozen=True)
 class ImuConfig:
     """Sample rate (Hz), white noise per sample, the standard deviations of the constant
-    biases (gyro rad/s, accelerometer m/s^2), the gyro's scale per axis and the stamps'
-    delay (s: a reading of the motion at T is stamped T + ``time_offset_s``)."""
+    biases (gyro rad/s, accelerometer m/s^2), the gyro's scale per axis, the stamps'
+    delay (s: a reading of the motion at T is stamped T + ``time_offset_s``) and the rotation
+    vector ``rotation_*_rad`` of the IMU's frame in the board's (the IMU reads ``R^T`` of the
+    board-frame rate and force)."""
 
     rate_hz: float = option(100.0, gt=0, le=10000)
     gyro_sigma_rad_s: float = option(2e-3, ge=0)
@@ -49,6 +52,9 @@ class ImuConfig:
     gyro_scale_y: float = option(1.0, gt=0, le=10)
     gyro_scale_z: float = option(1.0, gt=0, le=10)
     time_offset_s: float = option(0.0, ge=-1, le=1)
+    rotation_x_rad: float = option(0.0, ge=-0.5, le=0.5)
+    rotation_y_rad: float = option(0.0, ge=-0.5, le=0.5)
+    rotation_z_rad: float = option(0.0, ge=-0.5, le=0.5)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -81,8 +87,9 @@ def imu_of_motion(motion: Motion, up: ArrayLike, duration_s: float, config: ImuC
     bias = np.concatenate([rng.normal(0, config.gyro_bias_sigma_rad_s, 3),
                            rng.normal(0, config.accel_bias_sigma_mps2, 3)])
     scale = np.array([config.gyro_scale_x, config.gyro_scale_y, config.gyro_scale_z])
-    gyro = scale * rate + bias[:3] + rng.normal(0, config.gyro_sigma_rad_s, rate.shape)
-    accel_read = force + bias[3:] + rng.normal(0, config.accel_sigma_mps2, force.shape)
+    R = so3_exp([config.rotation_x_rad, config.rotation_y_rad, config.rotation_z_rad])
+    gyro = scale * (rate @ R) + bias[:3] + rng.normal(0, config.gyro_sigma_rad_s, rate.shape)
+    accel_read = force @ R + bias[3:] + rng.normal(0, config.accel_sigma_mps2, force.shape)
     return SimulatedImu(ImuStream(stamp, accel_read, gyro), bias, gravity)
 
 

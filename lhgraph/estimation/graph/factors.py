@@ -129,7 +129,8 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
             else None)
     offset = (sensor_offset_family(problem.n_sensors) if options.sensor_offset_sigma_m > 0
               else None)
-    calibrated = options.gyro_scale_sigma > 0 or options.imu_time_offset_sigma_s > 0
+    calibrated = (options.gyro_scale_sigma > 0 or options.imu_time_offset_sigma_s > 0
+                  or options.imu_rotation_sigma_rad > 0)
     layout = VariableLayout.of_problem(problem.n_states, len(problem.station_ids),
                                        fixed_stations=T_world_lh is not None,
                                        inertial=inertial is not None, diode_bias=bias,
@@ -181,7 +182,7 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
                                           IMU_BIAS.key(0)], ev.preintegration_error(i)))
         if calibrated:
             graph.add(gtsam.PriorFactorVector(
-                IMU_CALIBRATION.key(0), np.zeros(4),
+                IMU_CALIBRATION.key(0), np.zeros(IMU_CALIBRATION.dim),
                 gtsam.noiseModel.Diagonal.Sigmas(ev.imu.calibration_sigmas)))
         graph.add(gtsam.CustomFactor(
             gtsam.noiseModel.Isotropic.Sigma(1, GRAVITY_SIGMA_MPS2), [GRAVITY.key(0)],

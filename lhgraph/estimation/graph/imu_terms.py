@@ -3,9 +3,11 @@
 the graph has IMU factors (:mod:`lhgraph.estimation.inertial`).
 
 Variables read: the IMU bias ``I(0)``, the gravity ``N(0)`` and, when the options ask for it,
-the IMU calibration ``C(0)`` (per-axis gyro scale error ``s``, time offset ``tau``): the gyro
-residual is then ``(1 + s) omega_k + b_gyro - gyro(t_k + tau)`` and the accelerometer is read
-at each step's middle ``+ tau``.
+the IMU calibration ``C(0)`` (per-axis gyro scale error ``s``, time offset ``tau``, rotation
+vector ``theta`` of the IMU's frame in the board's, ``R = Exp(theta)``: IMU to board): the
+gyro residual is then ``(1 + s) (R^T omega_k) + b_gyro - gyro(t_k + tau)`` and the
+accelerometer, read at each step's middle ``+ tau``, is ``R`` times its reading in the board
+frame.
 
 **Preintegrated gyro** (``gyro_preintegration``): over every step k -> k + 1 the gyro's
 readings between the two states, bias-corrected (and scaled, offset), integrated into the
@@ -33,7 +35,7 @@ from lhgraph.estimation.graph.variables import (
 )
 from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, InertialData
 from lhgraph.estimation.residuals import accel_residuals, gyro_residuals
-from lhgraph.geometry.transforms import so3_exp, so3_log, so3_right_jacobian
+from lhgraph.geometry.transforms import skew, so3_exp, so3_log, so3_right_jacobian
 from lhgraph.io.imu import STANDARD_GRAVITY_MPS2
 
 Array = NDArray[np.float64]
@@ -58,10 +60,12 @@ class ImuTerms:
         self.calibration = layout.family(IMU_CALIBRATION.name)
         self.calibration_sigmas = np.array(
             [options.gyro_scale_sigma or FIXED_CALIBRATION_SIGMA] * 3
-            + [options.imu_time_offset_sigma_s or FIXED_CALIBRATION_SIGMA])
+            + [options.imu_time_offset_sigma_s or FIXED_CALIBRATION_SIGMA]
+            + [options.imu_rotation_sigma_rad or FIXED_CALIBRATION_SIGMA] * 3)
         """Prior spread of the calibration's components (an unasked one is held at 0)."""
         self.imu = np.zeros(9)  # IMU bias (gyro, accelerometer), gravity
-        self.C = np.zeros(4)  # gyro scale error (3), time offset (s)
+        self.C = np.zeros(7)  # gyro scale error (3), time offset (s), IMU rotation (3)
+        self._R = np.eye(3)  # IMU frame to board frame, Exp(C[4:])
         self.preintegrated = (np.zeros(0, dtype=np.int64) if not options.gyro_preintegration
                               else np.flatnonzero(data.rate_ok[:-1] & data.rate_ok[1:]
                                                   & (data.dt > 0)))
@@ -84,9 +88,14 @@ class ImuTerms:
         rate, self._force, self._rate_slope, self._force_slope = d.rate, d.force, None, None
         if self.calibration is not None:
             self.C = values.atVector(self.calibration.key(0))
-            rate, self._rate_slope, self._force, self._force_slope = d.read_at(self.C[3])
+            self._R = so3_exp(self.C[4:])
+            rate, self._rate_slope, force, self._force_slope = d.read_at(self.C[3])
+            self._force_imu = force
+            self._force = force @ self._R.T
         self._X, self._W = X, W
-        self.g = gyro_residuals(W * np.r_[1.0 + self.C[:3], np.ones(3)], self.imu[:3], rate)
+        self._u = W[:, :3] @ self._R  # the states' rates in the IMU frame
+        self.g = gyro_residuals(np.c_[(1.0 + self.C[:3]) * self._u, W[:, 3:]], self.imu[:3],
+                                rate)
         self.a = self._accel(False)[0]
         if len(self.preintegrated):
             self._preintegrate()
@@ -112,16 +121,16 @@ class ImuTerms:
         s = self.data.stream
         t = self._grid + self.C[3]
         gyro = np.stack([np.interp(t, s.time, s.gyro_rad_s[:, j]) for j in range(3)], axis=-1)
-        omega = (gyro - self.imu[:3]) / (1.0 + self.C[:3])
+        omega = ((gyro - self.imu[:3]) / (1.0 + self.C[:3])) @ self._R.T  # board frame
         n = len(self.preintegrated)
         dR = np.repeat(np.eye(3)[None], n, axis=0)
         J = np.zeros((n, 3, 3))
         for m in range(omega.shape[1]):
             phi = omega[:, m] * (self._h * self._inside[:, m])[:, None]
             E = so3_exp(phi)
-            # d omega / d b = -1 / (1 + s): the bias enters every sub-step's rate
-            Jb = -so3_right_jacobian(phi) * (self._h * self._inside[:, m])[:, None, None] \
-                / (1.0 + self.C[:3])[None, None, :]
+            # d omega / d b = -R / (1 + s): the bias enters every sub-step's rate
+            Jb = -so3_right_jacobian(phi) @ (self._R / (1.0 + self.C[:3])[None, :]) \
+                * (self._h * self._inside[:, m])[:, None, None]
             J = np.swapaxes(E, 1, 2) @ J + Jb
             dR = dR @ E
         self._dR, self._J_bias = dR, J
@@ -140,17 +149,23 @@ class ImuTerms:
         if self.calibration is None:
             return
         K = len(self._W)
+        scale = np.diag(1.0 + self.C[:3])
+        J_theta = so3_right_jacobian(self.C[4:])
         H_twist = np.zeros((K, 3, 6))
-        H_twist[:, :, :3] = np.diag(1.0 + self.C[:3])
+        H_twist[:, :, :3] = scale @ self._R.T
         H_gyro_bias = np.zeros((K, 3, 6))
         H_gyro_bias[:, :, :3] = np.eye(3)
-        H_cal = np.zeros((K, 3, 4))
-        H_cal[:, [0, 1, 2], [0, 1, 2]] = self._W[:, :3]
+        H_cal = np.zeros((K, 3, 7))
+        H_cal[:, [0, 1, 2], [0, 1, 2]] = self._u
         H_cal[:, :, 3] = -self._rate_slope
+        # d (R^T omega) / d theta = [R^T omega]x J_r(theta)
+        H_cal[:, :, 4:] = scale @ skew(self._u) @ J_theta
         self.Hg = (H_twist, H_gyro_bias, H_cal)
-        H_accel_cal = np.zeros((K - 1, 3, 4))
-        H_accel_cal[:, :, 3] = -np.einsum("kij,kj->ki", self._X[:-1, :3, :3],
-                                          self._force_slope)
+        R0 = self._X[:-1, :3, :3]
+        H_accel_cal = np.zeros((K - 1, 3, 7))
+        H_accel_cal[:, :, 3] = -np.einsum("kij,jl,kl->ki", R0, self._R, self._force_slope)
+        # d (R f) / d theta = -R [f]x J_r(theta)
+        H_accel_cal[:, :, 4:] = R0 @ self._R @ skew(self._force_imu) @ J_theta
         self.Ha = (*self.Ha, H_accel_cal)
 
     def _preintegration_jacobians(self) -> None:
@@ -191,7 +206,8 @@ class ImuTerms:
         gyro, accel = self.residuals()
         calibration = {} if self.calibration is None else {
             "gyro_scale_x": 1.0 + float(self.C[0]), "gyro_scale_y": 1.0 + float(self.C[1]),
-            "gyro_scale_z": 1.0 + float(self.C[2]), "imu_time_offset_s": float(self.C[3])}
+            "gyro_scale_z": 1.0 + float(self.C[2]), "imu_time_offset_s": float(self.C[3]),
+            "imu_rotation_deg": float(np.degrees(np.linalg.norm(self.C[4:])))}
         return calibration | {"gyro_bias_rad_s": float(np.linalg.norm(self.imu[:3])),
                               "accel_bias_mps2": float(np.linalg.norm(self.imu[3:6])),
                               "gravity_mps2": float(np.linalg.norm(self.imu[6:])),

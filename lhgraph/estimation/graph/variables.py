@@ -15,7 +15,7 @@ sweep offset    ``o``   1    angle offset (rad) common to every diode of sweep k
 station pose    ``l``   6    ``T_world_lh`` of station slot s >= 1 (slot 0 is the world)
 IMU bias        ``i``   6    gyro (rad/s) and accelerometer (m/s^2) bias, board frame
 gravity         ``n``   3    gravity vector (m/s^2) in the world
-IMU calibration ``c``   4    per-axis gyro scale error and the IMU's time offset (s)
+IMU calibration ``c``   7    gyro scale error, IMU time offset (s), IMU frame rotation
 ==============  ======  ===  ============================================================
 
 The last three exist only when the graph has IMU factors (:mod:`lhgraph.estimation.inertial`),
@@ -82,9 +82,10 @@ IMU_BIAS = VariableFamily("IMU bias", "i", 6, False, "root", 1.0,
 GRAVITY = VariableFamily("gravity", "n", 3, False, "root", 1.0,
                          "gravity vector (m/s^2) in the world")
 IMU_CALIBRATION = VariableFamily(
-    "IMU calibration", "c", 4, False, "root", 1.0,
-    "per-axis gyro scale error s (the gyro reads (1 + s) omega + bias) and the time offset "
-    "(s) at which the IMU is read on the light's clock (its stamps that much early)")
+    "IMU calibration", "c", 7, False, "root", 1.0,
+    "per-axis gyro scale error s (the gyro reads (1 + s) omega + bias), the time offset (s) "
+    "at which the IMU is read on the light's clock (its stamps that much late) and the "
+    "rotation vector (rad) of the IMU's frame in the board's")
 
 
 DIODE_BIAS = "diode bias"
