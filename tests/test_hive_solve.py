@@ -106,8 +106,8 @@ def test_align_to_mocap_recovers_known_transforms_and_offset():
 
 def test_hive_imu_scale_solved_and_a_wrong_scale_flagged(hive_import):
     # the tracker's gyro reads ~0.48x the true rate (docs/hive.md, against OptiTrack): taken
-    # as read the IMU refinement pulls the light apart and says so; with the scale solved
-    # (per axis) it finds ~0.5 and agrees with the light
+    # as read, with the preintegrated gyro, the IMU refinement pulls the light apart and says
+    # so; with the scale solved (per axis) it finds ~0.5 and agrees with the light
     from lhgraph.estimation.graph.options import GraphOptions
     from lhgraph.io.imu import load_imu
     from lhgraph.model.station import Convention
@@ -118,9 +118,11 @@ def test_hive_imu_scale_solved_and_a_wrong_scale_flagged(hive_import):
         out / "angles.csv"), 8.0)
     imu = load_imu(out / "imu.csv")
     models = station_models(out / "ootx.toml", Convention(-1, 1))
-    as_read = solve_graph(board, angles, models, imu=imu)
+    as_read = solve_graph(board, angles, models, GraphOptions(gyro_preintegration=True),
+                          imu=imu)
     assert any("the IMU disagrees with the light" in w for w in as_read.warnings)
-    solved = solve_graph(board, angles, models, GraphOptions(gyro_scale_sigma=1.0), imu=imu)
+    solved = solve_graph(board, angles, models, GraphOptions(
+        gyro_preintegration=True, gyro_scale_sigma=1.0), imu=imu)
     scales = [solved.diagnostics[f"gyro_scale_{a}"] for a in "xyz"]
     assert all(0.43 < s < 0.57 for s in scales), scales
     assert not any("disagrees" in w for w in solved.warnings)

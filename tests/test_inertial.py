@@ -366,9 +366,17 @@ def test_facing_stations_with_a_one_sided_board_join_through_the_imu():
     models = {k: s.model for k, s in sim.truth.stations.items()}
     with pytest.raises(SolverError, match="never seen by it and the reference"):
         solve_graph(sim.board, sim.angles, models)
+    from lhgraph.estimation.graph.options import GraphOptions
+
     result = solve_graph(sim.board, sim.angles, models, imu=sim.imu.stream)
     error = station_errors(sim.truth, result.stations)[0]
     assert error.position_norm_m < 5e-3 and np.degrees(error.rotation_rad) < 0.3
+    # the preintegrated gyro ties the rotations across the turns no station sees
+    tied = solve_graph(sim.board, sim.angles, models, GraphOptions(gyro_preintegration=True),
+                       imu=sim.imu.stream)
+    tied_error = station_errors(sim.truth, tied.stations)[0]
+    assert tied_error.rotation_rad < 0.5 * error.rotation_rad
+    assert np.degrees(tied_error.rotation_rad) < 0.05 and tied_error.position_norm_m < 2e-3
 
 
 def test_preintegrated_gyro_jacobians_match_numerical(miscalibrated_imu):
@@ -386,7 +394,7 @@ def test_preintegrated_gyro_jacobians_match_numerical(miscalibrated_imu):
     sim = miscalibrated_imu
     problem = build_problem(sim.board, sim.angles, {}, 0)
     data = inertial_data(sim.imu.stream, problem.state_time)
-    graph, ev = build_graph(problem, GraphOptions(), inertial=data)
+    graph, ev = build_graph(problem, GraphOptions(gyro_preintegration=True), inertial=data)
     init = PnPKabschInitialiser()(sim.board, sim.angles, problem)
     values = initial_values(ev.layout, init, initial_gravity(data, init.X))
     values.update(IMU_BIAS.key(0), np.array([0.02, -0.01, 0.03, 0.0, 0.0, 0.0]))

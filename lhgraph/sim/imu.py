@@ -3,10 +3,13 @@
 Sampled from the capture's exact motion (:class:`lhgraph.sim.motion.Motion`) at the board
 origin, in the board frame, on the capture's clock: the gyro reads the body angular rate,
 the accelerometer the specific force ``R^T (a - g)`` (+9.80665 m/s^2 along the scene's up
-at rest), each plus a constant bias drawn once per stream and white noise per sample. The
-default noise is of the order of a small MEMS part's at 100 Hz, such as the Crazyflie 2.1's
-BMI088 (gyro ~0.1 deg/s, accelerometer ~0.02 m/s^2 per sample); the biases are drawn with
-standard deviations 0.005 rad/s and 0.05 m/s^2. No bias random walk, no lever arm; a gyro
+at rest), each plus a bias drawn once per stream that then wanders, and white noise per
+sample. The default noise is of the order of a small MEMS part's at 100 Hz, such as the
+Crazyflie 2.1's BMI088 (gyro ~0.1 deg/s, accelerometer ~0.02 m/s^2 per sample, i.e.
+2e-4 rad/s and 2e-3 m/s^2 per root hertz); the biases are drawn with standard deviations
+0.005 rad/s and 0.05 m/s^2 and wander as random walks of 1e-4 rad/s and 1e-3 m/s^2 per
+root second (order-of-magnitude values for such a part; the truth's ``bias`` is the
+stream's mean). No lever arm; a gyro
 scale per axis (``gyro_scale_x``/``_y``/``_z``: the gyro reads that times the rate; the hive
 tracker's reads ~0.48), a stamp delay (``time_offset_s``: a reading of the motion at T
 is stamped T + offset) and a rotation of the IMU's frame (``rotation_x_rad``/``_y``/``_z``)
@@ -41,7 +44,8 @@ class ImuConfig:
     biases (gyro rad/s, accelerometer m/s^2), the gyro's scale per axis, the stamps'
     delay (s: a reading of the motion at T is stamped T + ``time_offset_s``) and the rotation
     vector ``rotation_*_rad`` of the IMU's frame in the board's (the IMU reads ``R^T`` of the
-    board-frame rate and force)."""
+    board-frame rate and force); the biases wander from their drawn start as random walks
+    of ``*_bias_walk_*`` per square-root second."""
 
     rate_hz: float = option(100.0, gt=0, le=10000)
     gyro_sigma_rad_s: float = option(2e-3, ge=0)
@@ -55,6 +59,8 @@ class ImuConfig:
     rotation_x_rad: float = option(0.0, ge=-0.5, le=0.5)
     rotation_y_rad: float = option(0.0, ge=-0.5, le=0.5)
     rotation_z_rad: float = option(0.0, ge=-0.5, le=0.5)
+    gyro_bias_walk_rad_s_per_sqrt_s: float = option(1e-4, ge=0)
+    accel_bias_walk_mps2_per_sqrt_s: float = option(1e-3, ge=0)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -88,9 +94,14 @@ def imu_of_motion(motion: Motion, up: ArrayLike, duration_s: float, config: ImuC
                            rng.normal(0, config.accel_bias_sigma_mps2, 3)])
     scale = np.array([config.gyro_scale_x, config.gyro_scale_y, config.gyro_scale_z])
     R = so3_exp([config.rotation_x_rad, config.rotation_y_rad, config.rotation_z_rad])
-    gyro = scale * (rate @ R) + bias[:3] + rng.normal(0, config.gyro_sigma_rad_s, rate.shape)
-    accel_read = force @ R + bias[3:] + rng.normal(0, config.accel_sigma_mps2, force.shape)
-    return SimulatedImu(ImuStream(stamp, accel_read, gyro), bias, gravity)
+    walk = np.cumsum(rng.normal(0.0, np.sqrt(1.0 / config.rate_hz), (len(stamp), 6)), axis=0)
+    walk *= np.r_[[config.gyro_bias_walk_rad_s_per_sqrt_s] * 3,
+                  [config.accel_bias_walk_mps2_per_sqrt_s] * 3]
+    gyro = scale * (rate @ R) + bias[:3] + walk[:, :3] \
+        + rng.normal(0, config.gyro_sigma_rad_s, rate.shape)
+    accel_read = force @ R + bias[3:] + walk[:, 3:] \
+        + rng.normal(0, config.accel_sigma_mps2, force.shape)
+    return SimulatedImu(ImuStream(stamp, accel_read, gyro), bias + walk.mean(axis=0), gravity)
 
 
 def simulate_imu(capture: SimulatedCapture, config: ImuConfig | None = None, seed: int = 0

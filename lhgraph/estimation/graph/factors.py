@@ -15,8 +15,8 @@
    state's twist and the IMU bias (linear: GTSAM's ``LinearContainerFactor``, no Python
    callback; with the IMU calibration, ``gyro_scale_sigma`` / ``imu_time_offset_sigma_s``,
    a callback on the twist, the bias and the calibration), an **accelerometer factor** over
-   every step, keys :func:`accel_keys`, with ``gyro_preintegration`` a **preintegrated gyro
-   factor** over every step on both poses and the IMU bias
+   every step, keys :func:`accel_keys`, with ``gyro_preintegration`` (off by default) a
+   **preintegrated gyro factor** over every step on both poses and the IMU bias
    (:mod:`lhgraph.estimation.graph.imu_terms`), one factor on the gravity's magnitude and,
    with the calibration, its zero-mean prior.
 

@@ -9,9 +9,10 @@ gyro residual is then ``(1 + s) (R^T omega_k) + b_gyro - gyro(t_k + tau)`` and t
 accelerometer, read at each step's middle ``+ tau``, is ``R`` times its reading in the board
 frame.
 
-**Preintegrated gyro** (``gyro_preintegration``): over every step k -> k + 1 the gyro's
-readings between the two states, bias-corrected (and scaled, offset), integrated into the
-rotation ``dR_k`` (at the IMU's own rate, in sub-steps of at most one sample period); the
+**Preintegrated gyro** (``gyro_preintegration``, off by default): over every step
+k -> k + 1 the gyro's readings between the two states, bias-corrected (and scaled, offset),
+integrated into the rotation ``dR_k`` (at the IMU's own rate, in sub-steps of at most one
+sample period); the
 residual is ``Log(dR_k^T R_k^T R_k+1)`` (3, rad), its noise ``gyro_sigma_rad_s`` per reading
 integrated over the step, ``sigma sqrt(dt / rate)``. It uses every reading, where the gyro
 factor reads one per state: across a turn that no station sees (no states for a third of a
