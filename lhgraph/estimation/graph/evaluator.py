@@ -104,7 +104,6 @@ class FactorEvaluator:
         self._motion_scale = 1.0  # 1/sqrt(s): the motion prior's covariance is s * Q
         self._bearing_scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
         self._jacobians_ready = False
-        self.inertial = inertial
         self.imu = None if inertial is None else ImuTerms(inertial, layout, options)
         """The IMU factors' residuals (None without IMU factors)."""
         self._bias = layout.family(DIODE_BIAS)
@@ -125,14 +124,18 @@ class FactorEvaluator:
     # --- noise levels --------------------------------------------------------------------
 
     def scale_bearing_noise(self, factor: float) -> None:
-        """Multiply the diodes' angle variance by ``factor``."""
+        """Multiply the diodes' angle variance by ``factor`` (before the first evaluation
+        too: the residuals are scaled when they are read)."""
         self._bearing_scale /= np.sqrt(factor)
-        self._scale_residuals()
+        if self._values is not None:
+            self._scale_residuals()
 
     def scale_motion_prior(self, factor: float) -> None:
-        """Multiply the motion prior's covariance by ``factor``."""
+        """Multiply the motion prior's covariance by ``factor`` (before the first evaluation
+        too)."""
         self._motion_scale /= np.sqrt(factor)
-        self._scale_residuals()
+        if self._values is not None:
+            self._scale_residuals()
 
     def angle_sigma(self) -> float:
         """Effective per-diode angle noise (rad) now."""

@@ -162,7 +162,6 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
         graph.add(build.motion(k, ev.motion_covariances[k], ev.motion_error(k)))
     ev.motion_factors = range(first, graph.size())
     if inertial is not None:
-        calibrated = layout.holds(IMU_CALIBRATION, 0)
         gyro_noise = gtsam.noiseModel.Isotropic.Sigma(3, options.gyro_sigma_rad_s)
         for k in np.flatnonzero(inertial.rate_ok).tolist():
             graph.add(gtsam.CustomFactor(
@@ -174,8 +173,7 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
             graph.add(gtsam.CustomFactor(accel_noise, accel_keys(k, calibrated),
                                          ev.accel_error(k)))
         for i, (k, sigma) in enumerate(zip(ev.imu.preintegrated.tolist(),
-                                           ev.imu.preintegration_sigmas.tolist()
-                                           if len(ev.imu.preintegrated) else [],
+                                           ev.imu.preintegration_sigmas.tolist(),
                                            strict=True)):
             graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(3, sigma),
                                          [BOARD_POSE.key(k), BOARD_POSE.key(k + 1),

@@ -71,6 +71,8 @@ class ImuTerms:
                               else np.flatnonzero(data.rate_ok[:-1] & data.rate_ok[1:]
                                                   & (data.dt > 0)))
         """Steps k (k -> k + 1) with a preintegrated gyro factor."""
+        self.preintegration_sigmas = np.zeros(0)
+        """Noise (rad) of each preintegrated gyro factor."""
         if len(self.preintegrated):
             self._substeps(options.gyro_sigma_rad_s)
 

@@ -76,7 +76,6 @@ class NoiseAdaptation:
         self.progress = progress
         self.graph = graph
         self.rounds_left = options.motion_prior_rounds
-        self._values: gtsam.Values | None = None
 
     @staticmethod
     def enabled(options: GraphOptions) -> bool:
@@ -86,21 +85,20 @@ class NoiseAdaptation:
     def __call__(self, values: gtsam.Values) -> bool:
         if self.rounds_left <= 0:
             return False
-        self._values = values
         self.evaluator.evaluate(values)
-        changed = self._update()
+        changed = self._update(values)
         if changed:
             self.rounds_left -= 1
         return changed
 
-    def _update(self) -> bool:
+    def _update(self, values: gtsam.Values) -> bool:
         """One variance-component update at the evaluator's current point; whether anything
         changed (False: both levels match the data or sit at their bounds)."""
         ev, options = self.evaluator, self.options
         chi2 = ev.motion_chi2_per_dof()
         redundant = options.motion_prior_estimate == "redundancy"
         if redundant and options.adapt_motion_prior:
-            rows, dof = self._motion_redundancy()
+            rows, dof = self._motion_redundancy(values)
             chi2 *= rows / max(dof, 1.0)
         ratio = float(np.clip(chi2, 1e-3, 1e3))
         if not options.adapt_motion_prior:
@@ -128,9 +126,8 @@ class NoiseAdaptation:
         ev.scale_bearing_noise(noise)
         return True
 
-    def _motion_redundancy(self) -> tuple[int, float]:
-        """The motion prior's rows and redundancy at the hook's values (:func:`redundancy`)."""
-        values = self._values
+    def _motion_redundancy(self, values: gtsam.Values) -> tuple[int, float]:
+        """The motion prior's rows and redundancy at ``values`` (:func:`redundancy`)."""
         lin = self.graph.linearize(values)
         return redundancy(lin, self.evaluator.motion_factors,
                           self.evaluator.layout.elimination_ordering(), values.dims())

@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 
+import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
@@ -140,7 +141,6 @@ def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation
     graph, ev = build_graph(problem, options, inertial=inertial)
     values = initial_values(ev.layout, init, gravity)
     if levels is not None:
-        ev.evaluate(values)
         ev.scale_bearing_noise((levels.angle_sigma() / ev.angle_sigma()) ** 2)
         ev.scale_motion_prior(levels.motion_psd_factor() / ev.motion_psd_factor())
     try:
@@ -198,7 +198,7 @@ def graph_preparation(angles: Angles, options: GraphOptions,
     return angles, options, few
 
 
-def _median_residual(ev: FactorEvaluator, values) -> float:
+def _median_residual(ev: FactorEvaluator, values: gtsam.Values) -> float:
     """Median absolute angle residual (rad) of ``ev``'s hits at ``values``."""
     ev.evaluate(values)
     return float(np.median(np.abs(ev.bearing_residuals())))
