@@ -37,27 +37,16 @@ import numpy as np  # noqa: E402
 from lhgraph.estimation.graph.options import GraphOptions  # noqa: E402
 from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
 from lhgraph.estimation.graph.track import track  # noqa: E402
-from lhgraph.geometry.transforms import inverse, rotation_angle, se3_log  # noqa: E402
+from lhgraph.geometry.transforms import rotation_angle  # noqa: E402
 from lhgraph.sim.imu import simulate_imu  # noqa: E402
 from lhgraph.sim.simulate import load_simulation_config, simulate  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from deck_benchmark import seeds_in_parallel, write_report  # noqa: E402
-from imu_targets import SIMULATED_NOISE  # noqa: E402
+from imu_targets import SIMULATED_NOISE, station_figures  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "configs/simulation/deck.toml"
-
-
-def station_figures(sim, result) -> dict:
-    """Station 1's position (mm) and rotation (deg) error, NEES and sigma (mm)."""
-    T_true = sim.truth.relative_to_reference().pose(1)
-    est = result.stations.relative_to_reference()
-    T_est = est.pose(1)
-    xi = se3_log(inverse(T_true) @ T_est)
-    return {"pos_mm": float(np.linalg.norm(T_est[:3, 3] - T_true[:3, 3]) * 1e3),
-            "rot_deg": float(np.degrees(rotation_angle(T_true[:3, :3].T @ T_est[:3, :3]))),
-            "nees": float(xi @ np.linalg.solve(est.stations[1].covariance, xi))}
 
 
 def path_figures(sim, path) -> tuple[float, float]:

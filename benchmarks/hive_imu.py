@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import platform
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -47,6 +48,9 @@ from lhgraph.model.board import load_board
 from lhgraph.model.station import Convention
 from lhgraph.workflow.inputs import station_models
 from lhgraph.workflow.window import motion_start
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from hive_slice_spread import in_slice  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 BAG = REPO.parent / "shared/data/hive-env8/data8.11.bag"
@@ -104,8 +108,8 @@ def main() -> int:
         turn = f"{d['imu_rotation_deg']:.2f}" if "imu_rotation_deg" in d else "-"
         diffs = []
         for k in range(args.slices):
-            inside = (angles.time >= t0 + 4 * k) & (angles.time < t0 + 4 * k + 8)
-            part = solve_graph(board, angles.select(inside), models, options, imu=stream)
+            part = solve_graph(board, angles.select(in_slice(angles, t0, k)), models, options,
+                               imu=stream)
             e = station_errors(whole.stations, part.stations)[0]
             diffs.append((e.position_norm_m * 1e3, np.degrees(e.rotation_rad)))
         rms = np.sqrt(np.mean(np.square(diffs), axis=0))

@@ -43,7 +43,7 @@ from joblib import Parallel, delayed
 from lhgraph.errors import SolverError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
-from lhgraph.geometry.transforms import inverse, se3_log
+from lhgraph.geometry.transforms import inverse, rotation_angle, se3_log
 from lhgraph.io.files import check_writable
 from lhgraph.io.imu import save_imu
 from lhgraph.model.calibration import StationCalibration, save_calibration
@@ -92,20 +92,26 @@ def whole_process_seconds(runs: int) -> tuple[float, float]:
     return statistics.median(times[False]), statistics.median(times[True])
 
 
+def station_figures(sim, result) -> dict:
+    """Station 1's position (mm) and rotation (deg) error, NEES and sigma (mm)."""
+    T_true = sim.truth.relative_to_reference().pose(1)
+    est = result.stations.relative_to_reference()
+    T_est = est.pose(1)
+    xi = se3_log(inverse(T_true) @ T_est)
+    return {"pos_mm": float(np.linalg.norm(T_est[:3, 3] - T_true[:3, 3]) * 1e3),
+            "rot_deg": float(np.degrees(rotation_angle(T_true[:3, :3].T @ T_est[:3, :3]))),
+            "nees": float(xi @ np.linalg.solve(est.stations[1].covariance, xi))}
+
+
 def errors(family: str, seed: int) -> dict:
     """Station 1's errors and NEES without and with the IMU on one capture."""
     sim = simulate(config(*MOTIONS[family]), seed)
     models = {k: s.model for k, s in sim.truth.stations.items()}
-    truth = sim.truth.relative_to_reference().pose(1)
     out = {"family": family, "seed": seed}
     for name, imu, options in (("light", None, None), ("imu", sim.imu.stream, None),
                                ("preintegrated", sim.imu.stream, PREINTEGRATED)):
-        est = solve_graph(sim.board, sim.angles, models, options, imu=imu)
-        station = est.stations.relative_to_reference().stations[1]
-        xi = se3_log(inverse(truth) @ station.T_world_lh)
-        out[name] = (float(np.linalg.norm(station.T_world_lh[:3, 3] - truth[:3, 3])) * 1e3,
-                     float(np.degrees(np.linalg.norm(xi[:3]))),
-                     float(xi @ np.linalg.solve(station.covariance, xi)))
+        f = station_figures(sim, solve_graph(sim.board, sim.angles, models, options, imu=imu))
+        out[name] = (f["pos_mm"], f["rot_deg"], f["nees"])
     return out
 
 
@@ -119,13 +125,9 @@ def facing(seed: int, options: GraphOptions) -> tuple[bool, float, float, float]
         light = True
     except SolverError:
         light = False
-    est = solve_graph(sim.board, sim.angles, models, options, imu=sim.imu.stream)
-    truth = sim.truth.relative_to_reference().pose(1)
-    station = est.stations.relative_to_reference().stations[1]
-    xi = se3_log(inverse(truth) @ station.T_world_lh)
-    return (light, float(np.linalg.norm(station.T_world_lh[:3, 3] - truth[:3, 3])) * 1e3,
-            float(np.degrees(np.linalg.norm(xi[:3]))),
-            float(xi @ np.linalg.solve(station.covariance, xi)))
+    f = station_figures(sim, solve_graph(sim.board, sim.angles, models, options,
+                                         imu=sim.imu.stream))
+    return light, f["pos_mm"], f["rot_deg"], f["nees"]
 
 
 def main() -> int:
