@@ -39,6 +39,7 @@ lhb_hw_t fake_hw_hooks(fake_hw_t *hw)
 void default_template(lhcap_header_t *t)
 {
     memset(t, 0, sizeof *t);
+    t->version = LHCAP_VERSION;
     t->sample_rate = 2000000u;
     t->board_id = 0x12345678u;
     t->fw_version = 0x000100u;

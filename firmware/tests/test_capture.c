@@ -11,8 +11,12 @@
 
 static uint32_t samples[NS];
 static uint32_t storage[2 * 1000];
-static uint8_t want[108 + 8 * NS + 4];
-static uint8_t got[108 + 8 * NS + 4];
+#define NI 8u /* IMU samples in the version-2 test */
+
+static uint8_t want[128 + 8 * NS + 16 * NI + 4];
+static uint8_t got[128 + 8 * NS + 16 * NI + 4];
+static uint8_t v1[108 + 8 * NS + 4];
+static uint32_t imu_storage[LHB_IMU_WORDS * NI];
 
 static void run_poll_until_ready(lhb_capture_t *c, uint32_t now)
 {
@@ -145,5 +149,98 @@ int main(void)
     CHECK_EQ(c.image_size, n);
     CHECK_EQ(lhb_capture_read(&c, 0, got, (uint32_t)n), LHB_OK);
     CHECK(memcmp(got, want, n) == 0);
+
+    /* version 2: IMU samples added between feeds (as the data-ready interrupt does) come
+     * after the edge records; the image is the version-1 one with the longer header, the
+     * IMU records and the CRC over all of it */
+    lhcap_header_t t2 = t;
+    t2.version = LHCAP_VERSION_IMU;
+    t2.imu_part = LHCAP_IMU_ICM42688P;
+    t2.imu_odr_hz = 1000u;
+    t2.imu_gyro_fs_dps = 2000u;
+    t2.imu_accel_fs_g = 16u;
+    lhb_capture_init(&c, &hw, storage, 1000, &t2);
+    int16_t raw[6] = {0};
+    CHECK_EQ(lhb_capture_add_imu(&c, 0, raw), -LHB_E_STATE); /* not capturing: ignored */
+    lhb_capture_set_imu(&c, imu_storage, NI);
+    c.fixed_start_time = true;
+    CHECK_EQ(lhb_capture_arm(&c, 2, 0, 0, 0), LHB_OK);
+    lhb_capture_poll(&c, 0);
+    uint32_t kept = 0;
+    for (uint32_t i = 0; i < NS / 500u; i++) {
+        if (i > 0) {
+            lhb_capture_feed(&c, samples + 500u * (i - 1u), 500u);
+        }
+        for (int a = 0; a < 6; a++) {
+            raw[a] = (int16_t)(a % 2 ? -(int)(1000 * i + (uint32_t)a) : (int)(1000 * i) + a);
+        }
+        if (i == 3) {
+            CHECK_EQ(lhb_capture_add_imu(&c, 500u * i - 500u, raw), -LHB_E_RANGE); /* late */
+            lhb_capture_imu_missed(&c);
+            continue;
+        }
+        if (lhb_capture_add_imu(&c, 500u * i + 17u, raw) == LHB_OK) {
+            kept++;
+        }
+    }
+    CHECK_EQ(kept, 7);
+    CHECK_EQ(lhb_capture_add_imu(&c, NS, raw), -LHB_E_STATE); /* past the last sample */
+    CHECK(lhb_capture_feed(&c, samples + NS - 500u, 500u));
+    CHECK_EQ(lhb_capture_add_imu(&c, NS - 1u, raw), -LHB_E_STATE); /* done */
+    run_poll_until_ready(&c, 1);
+    CHECK_EQ(c.state, LHB_STATE_READY);
+    size_t n1 = reference_image(&t, samples, NS, v1);
+    uint32_t edges = lhb_get_le32(v1 + 40);
+    memcpy(want, v1, 108);
+    lhb_put_le16(want + 4, 2);
+    lhb_put_le16(want + 6, 128);
+    lhb_put_le32(want + 108, 7);   /* IMU records */
+    lhb_put_le32(want + 112, 2);   /* missed: the late one and the driver's */
+    lhb_put_le16(want + 116, 1);
+    lhb_put_le16(want + 118, 1000);
+    lhb_put_le16(want + 120, 2000);
+    lhb_put_le16(want + 122, 16);
+    lhb_put_le32(want + 124, 0);
+    memcpy(want + 128, v1 + 108, 8u * edges);
+    size_t pos = 128 + 8u * edges;
+    for (uint32_t i = 0; i < NS / 500u; i++) {
+        if (i == 3) {
+            continue;
+        }
+        lhb_put_le32(want + pos, 500u * i + 17u);
+        for (int a = 0; a < 6; a++) {
+            int v = a % 2 ? -(int)(1000 * i + (uint32_t)a) : (int)(1000 * i) + a;
+            lhb_put_le16(want + pos + 4 + 2 * a, (uint16_t)(int16_t)v);
+        }
+        pos += 16;
+    }
+    lhb_put_le32(want + pos, lhb_crc32(want, pos));
+    n = pos + 4;
+    CHECK_EQ(n, n1 + 20 + 16 * 7);
+    CHECK_EQ(c.image_size, n);
+    CHECK_EQ(lhb_capture_read(&c, 0, got, (uint32_t)n), LHB_OK);
+    CHECK(memcmp(got, want, n) == 0);
+    ok = 1;
+    for (uint32_t off = 0; off < n; off += 1 + off / 5) { /* odd offsets across the regions */
+        uint32_t len = (uint32_t)(n - off < 7 ? n - off : 7);
+        uint8_t part[7];
+        if (lhb_capture_read(&c, off, part, len) != LHB_OK || memcmp(part, want + off, len) != 0) {
+            ok = 0;
+        }
+    }
+    CHECK(ok);
+    /* a capture that stops early drops the IMU records past its last sample */
+    lhb_capture_init(&c, &hw, storage, 5, &t2);
+    lhb_capture_set_imu(&c, imu_storage, NI);
+    CHECK_EQ(lhb_capture_arm(&c, 2, 0, 0, 0), LHB_OK);
+    lhb_capture_poll(&c, 0);
+    CHECK_EQ(lhb_capture_add_imu(&c, 3000, raw), LHB_OK); /* stamped ahead of the feed */
+    CHECK(lhb_capture_feed(&c, samples, NS));              /* overflows before 3000 */
+    run_poll_until_ready(&c, 1);
+    CHECK(c.samples_done < 3000);
+    CHECK_EQ(c.imu.n, 0);
+    CHECK_EQ(lhb_capture_read(&c, 0, got, c.image_size), LHB_OK);
+    CHECK_EQ(lhb_get_le32(got + 108), 0);
+    CHECK_EQ(c.image_size, 128 + 8 * 5 + 4);
     return check_result("capture");
 }

@@ -110,7 +110,7 @@ int main(void)
     h.start_time_us = 0x0102030405060708ull;
     h.capture_samples = 16000000u;
     h.n_records = 123456u;
-    uint8_t hb[LHCAP_HEADER_LEN];
+    uint8_t hb[LHCAP_HEADER_LEN_IMU];
     lhcap_header_pack(&h, hb);
     CHECK(memcmp(hb, "LHCP", 4) == 0);
     CHECK_EQ(lhb_get_le16(hb + 4), 1);
@@ -122,13 +122,15 @@ int main(void)
     CHECK_EQ(lhb_get_le64(hb + 32), 16000000);
     CHECK_EQ(lhb_get_le32(hb + 40), 123456);
     CHECK_EQ((int16_t)lhb_get_le16(hb + 44 + 2 * 31), -1);
-    CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), LHB_OK);
+    CHECK_EQ(lhcap_header_unpack(hb, LHCAP_HEADER_LEN, &h2), LHB_OK);
     CHECK(memcmp(&h, &h2, sizeof h) == 0);
     CHECK_EQ(lhcap_header_unpack(hb, 107, &h2), -LHB_E_ARG);
     hb[0] = 'X';
     CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
     hb[0] = 'L';
-    hb[4] = 2;
+    hb[4] = 2; /* version 2 needs its 128-byte header length */
+    CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
+    hb[4] = 3;
     CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
     hb[4] = 1;
     hb[12] = 2; /* unknown flag */
@@ -136,5 +138,66 @@ int main(void)
     hb[12] = 0;
     hb[44] = 0xFE; hb[45] = 0xFF; /* channel id -2 */
     CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
+
+    /* version 2: the IMU fields at 108..127 */
+    default_template(&h);
+    h.version = LHCAP_VERSION_IMU;
+    h.n_records = 9u;
+    h.n_imu = 0x01020304u;
+    h.imu_missed = 7u;
+    h.imu_part = LHCAP_IMU_ICM42688P;
+    h.imu_odr_hz = 1000u;
+    h.imu_gyro_fs_dps = 2000u;
+    h.imu_accel_fs_g = 16u;
+    memset(hb, 0xAA, sizeof hb);
+    lhcap_header_pack(&h, hb);
+    CHECK_EQ(lhb_get_le16(hb + 4), 2);
+    CHECK_EQ(lhb_get_le16(hb + 6), 128);
+    CHECK_EQ(lhb_get_le32(hb + 40), 9);
+    CHECK_EQ(lhb_get_le32(hb + 108), 0x01020304);
+    CHECK_EQ(lhb_get_le32(hb + 112), 7);
+    CHECK_EQ(lhb_get_le16(hb + 116), 1);
+    CHECK_EQ(lhb_get_le16(hb + 118), 1000);
+    CHECK_EQ(lhb_get_le16(hb + 120), 2000);
+    CHECK_EQ(lhb_get_le16(hb + 122), 16);
+    CHECK_EQ(lhb_get_le32(hb + 124), 0);
+    CHECK_EQ(lhcap_header_len(1), 108);
+    CHECK_EQ(lhcap_header_len(2), 128);
+    CHECK_EQ(lhcap_header_len(3), 0);
+    CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), LHB_OK);
+    CHECK(memcmp(&h, &h2, sizeof h) == 0);
+    CHECK_EQ(lhcap_header_unpack(hb, 127, &h2), -LHB_E_ARG); /* short for version 2 */
+    hb[116] = 2; /* unknown IMU part */
+    CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
+    hb[116] = 0; /* no IMU but IMU records */
+    CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
+    hb[6] = 108; /* version 2 with a version-1 header length */
+    CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
+
+    /* IMU log: little-endian words of the record, increasing indices, capacity */
+    uint32_t imu_store[LHB_IMU_WORDS * 3];
+    lhb_imu_log_t log;
+    lhb_imu_log_init(&log, imu_store, 3);
+    const int16_t raw[6] = {1, -2, 3, -32768, 32767, -1};
+    CHECK(lhb_imu_log_add(&log, 10, raw));
+    CHECK_EQ(imu_store[0], 10);
+    CHECK_EQ(imu_store[1], 0xFFFE0001u);
+    CHECK_EQ(imu_store[2], 0x80000003u);
+    CHECK_EQ(imu_store[3], 0xFFFF7FFFu);
+    CHECK(!lhb_imu_log_add(&log, 10, raw)); /* not increasing */
+    CHECK(lhb_imu_log_add(&log, 20, raw));
+    CHECK(lhb_imu_log_add(&log, 30, raw));
+    CHECK(!lhb_imu_log_add(&log, 40, raw)); /* full */
+    lhb_imu_log_miss(&log);
+    CHECK_EQ(log.n, 3);
+    CHECK_EQ(log.missed, 3);
+    lhb_imu_log_trim(&log, 21);
+    CHECK_EQ(log.n, 2);
+    lhb_imu_log_trim(&log, 0);
+    CHECK_EQ(log.n, 0);
+    lhb_imu_log_t none;
+    lhb_imu_log_init(&none, NULL, 5);
+    CHECK(!lhb_imu_log_add(&none, 1, raw));
+    CHECK_EQ(none.missed, 1);
     return check_result("edges");
 }

@@ -16,12 +16,23 @@ void lhb_capture_init(lhb_capture_t *c, const lhb_hw_t *hw, uint32_t *storage,
     }
     c->tmpl = *tmpl;
     /* the image size must fit in u32: cap the record count accordingly */
-    uint32_t max_records = (0xFFFFFFFFu - LHCAP_HEADER_LEN - LHCAP_TRAILER_LEN) / LHCAP_RECORD_LEN;
+    uint32_t max_records =
+        (0xFFFFFFFFu - LHCAP_HEADER_LEN_IMU - LHCAP_TRAILER_LEN) / LHCAP_RECORD_LEN;
     if (storage_records > max_records) {
         storage_records = max_records;
     }
     lhb_edges_init(&c->edges, storage, storage_records);
+    lhb_imu_log_init(&c->imu, NULL, 0u);
     c->state = LHB_STATE_IDLE;
+}
+
+void lhb_capture_set_imu(lhb_capture_t *c, uint32_t *storage, uint32_t storage_records)
+{
+    /* the image size must fit in u32 next to the edge records */
+    uint32_t max_records = (0xFFFFFFFFu - LHCAP_HEADER_LEN_IMU - LHCAP_TRAILER_LEN -
+                            LHCAP_RECORD_LEN * c->edges.cap) / LHCAP_IMU_RECORD_LEN;
+    lhb_imu_log_init(&c->imu, storage,
+                     storage_records > max_records ? max_records : storage_records);
 }
 
 static void hw_stop(lhb_capture_t *c)
@@ -61,6 +72,7 @@ int lhb_capture_arm(lhb_capture_t *c, uint32_t duration_ms, uint32_t delay_ms,
     c->image_crc = 0;
     c->flags = 0;
     lhb_edges_init(&c->edges, c->edges.storage, c->edges.cap);
+    lhb_imu_log_init(&c->imu, c->imu.storage, c->imu.cap);
     c->state = LHB_STATE_ARMED;
     return LHB_OK;
 }
@@ -93,6 +105,24 @@ bool lhb_capture_feed(lhb_capture_t *c, const uint32_t *samples, size_t n)
     return false;
 }
 
+int lhb_capture_add_imu(lhb_capture_t *c, uint32_t sample_index, const int16_t raw[6])
+{
+    if (c->state != LHB_STATE_CAPTURING || c->done != 0u) {
+        return -LHB_E_STATE;
+    }
+    if (sample_index >= c->target) {
+        return -LHB_E_STATE; /* past the capture's end: not part of it */
+    }
+    return lhb_imu_log_add(&c->imu, sample_index, raw) ? LHB_OK : -LHB_E_RANGE;
+}
+
+void lhb_capture_imu_missed(lhb_capture_t *c)
+{
+    if (c->state == LHB_STATE_CAPTURING && c->done == 0u) {
+        lhb_imu_log_miss(&c->imu);
+    }
+}
+
 uint32_t lhb_capture_delay_left(const lhb_capture_t *c, uint32_t now_ms)
 {
     if (c->state != LHB_STATE_ARMED) {
@@ -114,26 +144,46 @@ static void finalise_begin(lhb_capture_t *c)
     }
     h.capture_samples = c->samples_done;
     h.n_records = c->edges.n;
+    if (h.version == LHCAP_VERSION_IMU) {
+        lhb_imu_log_trim(&c->imu, c->samples_done);
+        h.n_imu = c->imu.n;
+        h.imu_missed = c->imu.missed;
+    } else {
+        h.version = LHCAP_VERSION;
+        c->imu.n = 0; /* a version-1 image has no IMU records */
+    }
+    c->header_len = lhcap_header_len(h.version);
     lhcap_header_pack(&h, c->header);
-    c->crc = lhb_crc32(c->header, LHCAP_HEADER_LEN);
+    c->crc = lhb_crc32(c->header, c->header_len);
     c->crc_next = 0;
     c->finalising = true;
 }
 
+static uint32_t crc_words(uint32_t crc, const uint32_t *words, uint32_t n)
+{
+    uint8_t b[4];
+    for (uint32_t i = 0; i < n; i++) {
+        lhb_put_le32(b, words[i]);
+        crc = lhb_crc32_update(crc, b, sizeof b);
+    }
+    return crc;
+}
+
 static bool finalise_step(lhb_capture_t *c)
 {
+    uint32_t total = c->edges.n + c->imu.n; /* records: edges first, then IMU */
     uint32_t end = c->crc_next + LHB_FINALISE_STEP;
-    if (end > c->edges.n || end < c->crc_next) {
-        end = c->edges.n;
+    if (end > total || end < c->crc_next) {
+        end = total;
     }
-    uint8_t rec[LHCAP_RECORD_LEN];
     for (uint32_t i = c->crc_next; i < end; i++) {
-        lhb_put_le32(rec, c->edges.storage[2u * i]);
-        lhb_put_le32(rec + 4, c->edges.storage[2u * i + 1u]);
-        c->crc = lhb_crc32_update(c->crc, rec, sizeof rec);
+        c->crc = i < c->edges.n
+                     ? crc_words(c->crc, c->edges.storage + 2u * i, 2u)
+                     : crc_words(c->crc, c->imu.storage + LHB_IMU_WORDS * (i - c->edges.n),
+                                 LHB_IMU_WORDS);
     }
     c->crc_next = end;
-    return end == c->edges.n;
+    return end == total;
 }
 
 void lhb_capture_poll(lhb_capture_t *c, uint32_t now_ms)
@@ -157,7 +207,8 @@ void lhb_capture_poll(lhb_capture_t *c, uint32_t now_ms)
     if (finalise_step(c)) {
         c->finalising = false;
         c->image_crc = c->crc;
-        c->image_size = LHCAP_HEADER_LEN + LHCAP_RECORD_LEN * c->edges.n + LHCAP_TRAILER_LEN;
+        c->image_size = c->header_len + LHCAP_RECORD_LEN * c->edges.n +
+                        LHCAP_IMU_RECORD_LEN * c->imu.n + LHCAP_TRAILER_LEN;
         c->state = LHB_STATE_READY;
     }
 }
@@ -170,29 +221,34 @@ int lhb_capture_read(const lhb_capture_t *c, uint32_t offset, uint8_t *dst, uint
     if (offset > c->image_size || len > c->image_size - offset || (dst == NULL && len != 0u)) {
         return -LHB_E_RANGE;
     }
-    uint32_t rec_end = LHCAP_HEADER_LEN + LHCAP_RECORD_LEN * c->edges.n;
+    uint32_t edges_end = c->header_len + LHCAP_RECORD_LEN * c->edges.n;
+    uint32_t imu_end = edges_end + LHCAP_IMU_RECORD_LEN * c->imu.n;
     while (len > 0u) {
         uint32_t chunk;
-        if (offset < LHCAP_HEADER_LEN) {
-            chunk = LHCAP_HEADER_LEN - offset;
+        if (offset < c->header_len) {
+            chunk = c->header_len - offset;
             chunk = chunk < len ? chunk : len;
             memcpy(dst, c->header + offset, chunk);
-        } else if (offset < rec_end) {
-            uint32_t rel = offset - LHCAP_HEADER_LEN;
-            uint32_t word = rel / 4u;
-            uint32_t in_word = rel % 4u;
+        } else {
+            /* the rest is little-endian words: edge records, IMU records, the CRC */
+            uint32_t word;
+            uint32_t rel;
+            if (offset < edges_end) {
+                rel = offset - c->header_len;
+                word = c->edges.storage[rel / 4u];
+            } else if (offset < imu_end) {
+                rel = offset - edges_end;
+                word = c->imu.storage[rel / 4u];
+            } else {
+                rel = offset - imu_end;
+                word = c->image_crc;
+            }
             uint8_t tmp[4];
-            lhb_put_le32(tmp, c->edges.storage[word]);
+            lhb_put_le32(tmp, word);
+            uint32_t in_word = rel % 4u;
             chunk = 4u - in_word;
             chunk = chunk < len ? chunk : len;
             memcpy(dst, tmp + in_word, chunk);
-        } else {
-            uint8_t tmp[4];
-            lhb_put_le32(tmp, c->image_crc);
-            uint32_t in_tr = offset - rec_end;
-            chunk = 4u - in_tr;
-            chunk = chunk < len ? chunk : len;
-            memcpy(dst, tmp + in_tr, chunk);
         }
         dst += chunk;
         offset += chunk;

@@ -5,11 +5,19 @@
 #include "lhb/endian.h"
 #include "lhb/errors.h"
 
-void lhcap_header_pack(const lhcap_header_t *h, uint8_t out[LHCAP_HEADER_LEN])
+uint32_t lhcap_header_len(uint16_t version)
 {
+    return version == LHCAP_VERSION ? LHCAP_HEADER_LEN
+           : version == LHCAP_VERSION_IMU ? LHCAP_HEADER_LEN_IMU
+                                          : 0u;
+}
+
+void lhcap_header_pack(const lhcap_header_t *h, uint8_t out[LHCAP_HEADER_LEN_IMU])
+{
+    bool imu = h->version == LHCAP_VERSION_IMU;
     memcpy(out, LHCAP_MAGIC, 4);
-    lhb_put_le16(out + 4, (uint16_t)LHCAP_VERSION);
-    lhb_put_le16(out + 6, (uint16_t)LHCAP_HEADER_LEN);
+    lhb_put_le16(out + 4, (uint16_t)(imu ? LHCAP_VERSION_IMU : LHCAP_VERSION));
+    lhb_put_le16(out + 6, (uint16_t)(imu ? LHCAP_HEADER_LEN_IMU : LHCAP_HEADER_LEN));
     lhb_put_le32(out + 8, h->sample_rate);
     lhb_put_le32(out + 12, h->flags);
     lhb_put_le32(out + 16, h->board_id);
@@ -20,14 +28,29 @@ void lhcap_header_pack(const lhcap_header_t *h, uint8_t out[LHCAP_HEADER_LEN])
     for (unsigned k = 0; k < LHCAP_CHANNELS; k++) {
         lhb_put_le16(out + 44 + 2 * k, (uint16_t)h->channel_map[k]);
     }
+    if (imu) {
+        lhb_put_le32(out + 108, h->n_imu);
+        lhb_put_le32(out + 112, h->imu_missed);
+        lhb_put_le16(out + 116, h->imu_part);
+        lhb_put_le16(out + 118, h->imu_odr_hz);
+        lhb_put_le16(out + 120, h->imu_gyro_fs_dps);
+        lhb_put_le16(out + 122, h->imu_accel_fs_g);
+        lhb_put_le32(out + 124, 0u);
+    }
 }
 
 int lhcap_header_unpack(const uint8_t *buf, size_t len, lhcap_header_t *h)
 {
-    if (buf == NULL || h == NULL || len < LHCAP_HEADER_LEN || memcmp(buf, LHCAP_MAGIC, 4) != 0 ||
-        lhb_get_le16(buf + 4) != LHCAP_VERSION || lhb_get_le16(buf + 6) != LHCAP_HEADER_LEN) {
+    if (buf == NULL || h == NULL || len < LHCAP_HEADER_LEN || memcmp(buf, LHCAP_MAGIC, 4) != 0) {
         return -LHB_E_ARG;
     }
+    uint16_t version = lhb_get_le16(buf + 4);
+    uint32_t header_len = lhcap_header_len(version);
+    if (header_len == 0u || lhb_get_le16(buf + 6) != header_len || len < header_len) {
+        return -LHB_E_ARG;
+    }
+    memset(h, 0, sizeof *h);
+    h->version = version;
     h->sample_rate = lhb_get_le32(buf + 8);
     h->flags = lhb_get_le32(buf + 12);
     h->board_id = lhb_get_le32(buf + 16);
@@ -41,6 +64,17 @@ int lhcap_header_unpack(const uint8_t *buf, size_t len, lhcap_header_t *h)
     for (unsigned k = 0; k < LHCAP_CHANNELS; k++) {
         h->channel_map[k] = (int16_t)lhb_get_le16(buf + 44 + 2 * k);
         if (h->channel_map[k] < -1) {
+            return -LHB_E_ARG;
+        }
+    }
+    if (version == LHCAP_VERSION_IMU) {
+        h->n_imu = lhb_get_le32(buf + 108);
+        h->imu_missed = lhb_get_le32(buf + 112);
+        h->imu_part = lhb_get_le16(buf + 116);
+        h->imu_odr_hz = lhb_get_le16(buf + 118);
+        h->imu_gyro_fs_dps = lhb_get_le16(buf + 120);
+        h->imu_accel_fs_g = lhb_get_le16(buf + 122);
+        if (h->imu_part > LHCAP_IMU_ICM42688P || (h->imu_part == LHCAP_IMU_NONE && h->n_imu != 0u)) {
             return -LHB_E_ARG;
         }
     }
@@ -100,4 +134,39 @@ size_t lhb_edges_feed(lhb_edges_t *e, const uint32_t *samples, size_t n)
     e->n = count;
     e->index += i;
     return i;
+}
+
+void lhb_imu_log_init(lhb_imu_log_t *l, uint32_t *storage, uint32_t cap_records)
+{
+    l->storage = storage;
+    l->cap = storage == NULL ? 0u : cap_records;
+    l->n = 0;
+    l->missed = 0;
+}
+
+bool lhb_imu_log_add(lhb_imu_log_t *l, uint32_t sample_index, const int16_t raw[6])
+{
+    if (l->n >= l->cap || (l->n > 0u && sample_index <= l->storage[LHB_IMU_WORDS * (l->n - 1u)])) {
+        l->missed++;
+        return false;
+    }
+    uint32_t *w = l->storage + LHB_IMU_WORDS * l->n;
+    w[0] = sample_index;
+    for (unsigned k = 0; k < 3; k++) {
+        w[1 + k] = (uint32_t)(uint16_t)raw[2 * k] | ((uint32_t)(uint16_t)raw[2 * k + 1] << 16);
+    }
+    l->n++;
+    return true;
+}
+
+void lhb_imu_log_miss(lhb_imu_log_t *l)
+{
+    l->missed++;
+}
+
+void lhb_imu_log_trim(lhb_imu_log_t *l, uint32_t end)
+{
+    while (l->n > 0u && l->storage[LHB_IMU_WORDS * (l->n - 1u)] >= end) {
+        l->n--;
+    }
 }
