@@ -5,7 +5,9 @@
  * Prints the path to open (the pty, or --link) as the first line of stdout and serves the
  * capture over the link protocol until killed. ARM "captures" by replaying the file's port
  * words through the same edge extractor the board uses, spread over the requested duration
- * (times --time-scale), so a download returns the file byte for byte.
+ * (times --time-scale), so a download returns the file byte for byte. A version-2 file's IMU
+ * records are added as the replay reaches their sample index (as the board's data-ready
+ * interrupt adds them), and its missed-sample count is reproduced.
  *
  * Fault injection (board -> host direction): --drop-every N drops every Nth byte sent,
  * --flip-every N flips one bit of every Nth byte sent, --disconnect-after-blocks N closes the
@@ -66,12 +68,15 @@ static double g_wire_time; /* when the paced wire becomes free (s, monotonic) */
 static lhcap_header_t g_hdr;
 static uint32_t *g_src;  /* 2 u32 per record */
 static uint32_t g_src_n;
+static uint32_t *g_imu;  /* LHB_IMU_WORDS u32 per IMU record (index, then 6 raw i16) */
+static uint32_t g_imu_n;
 
 /* replay state */
 static bool g_sampling;
 static double g_sampling_t0;
 static uint32_t g_fed;   /* samples fed so far */
 static uint32_t g_rec;   /* current source record */
+static uint32_t g_imu_next; /* next IMU record to add */
 
 static lhb_capture_t g_cap;
 static lhb_proto_t g_proto;
@@ -219,7 +224,26 @@ static int hw_start(void *ctx, uint32_t n)
     g_sampling_t0 = now_s();
     g_fed = 0;
     g_rec = 0;
+    g_imu_next = 0;
+    for (uint32_t k = 0; k < g_hdr.imu_missed; k++) {
+        lhb_capture_imu_missed(&g_cap);
+    }
     return 0;
+}
+
+/* IMU records stamped before sample `end`: added while their samples are being taken */
+static void replay_imu(uint32_t end)
+{
+    while (g_imu_next < g_imu_n && g_imu[LHB_IMU_WORDS * g_imu_next] < end) {
+        const uint32_t *w = g_imu + LHB_IMU_WORDS * g_imu_next;
+        int16_t raw[6];
+        for (unsigned k = 0; k < 3; k++) {
+            raw[2 * k] = (int16_t)(uint16_t)w[1 + k];
+            raw[2 * k + 1] = (int16_t)(uint16_t)(w[1 + k] >> 16);
+        }
+        (void)lhb_capture_add_imu(&g_cap, w[0], raw);
+        g_imu_next++;
+    }
 }
 
 static void hw_stop(void *ctx)
@@ -250,6 +274,7 @@ static void replay_step(void)
             }
             buf[i] = g_src[2u * g_rec + 1u];
         }
+        replay_imu(g_fed + n);
         g_fed += n;
         if (lhb_capture_feed(&g_cap, buf, n)) {
             g_sampling = false; /* as the DMA interrupt does on the board */
@@ -286,10 +311,12 @@ static void load_capture(void)
     }
     fclose(f);
     if (lhcap_header_unpack(buf, (size_t)size, &g_hdr) != LHB_OK) {
-        load_fail("not a version-1 .lhcap header of 108 bytes (or unknown flags)");
+        load_fail("not a .lhcap header of version 1 (108 bytes) or 2 (128 bytes), or unknown "
+                  "flags or IMU part");
     }
-    uint64_t want = LHCAP_HEADER_LEN + (uint64_t)LHCAP_RECORD_LEN * g_hdr.n_records +
-                    LHCAP_TRAILER_LEN;
+    uint32_t header_len = lhcap_header_len(g_hdr.version);
+    uint64_t want = header_len + (uint64_t)LHCAP_RECORD_LEN * g_hdr.n_records +
+                    (uint64_t)LHCAP_IMU_RECORD_LEN * g_hdr.n_imu + LHCAP_TRAILER_LEN;
     if (want != (uint64_t)size || g_hdr.n_records == 0) {
         load_fail("file size disagrees with the record count");
     }
@@ -302,7 +329,7 @@ static void load_capture(void)
         die("malloc");
     }
     for (uint32_t i = 0; i < g_src_n; i++) {
-        const uint8_t *r = buf + LHCAP_HEADER_LEN + (size_t)LHCAP_RECORD_LEN * i;
+        const uint8_t *r = buf + header_len + (size_t)LHCAP_RECORD_LEN * i;
         g_src[2u * i] = lhb_get_le32(r);
         g_src[2u * i + 1u] = lhb_get_le32(r + 4);
         if (i == 0 ? g_src[0] != 0
@@ -313,6 +340,21 @@ static void load_capture(void)
     if (g_hdr.capture_samples <= g_src[2u * (g_src_n - 1u)] ||
         g_hdr.capture_samples > 0xFFFFFFFFull) {
         load_fail("capture length in samples is not past the last record (or > 2^32-1)");
+    }
+    g_imu_n = g_hdr.n_imu;
+    g_imu = malloc(sizeof(uint32_t) * LHB_IMU_WORDS * (g_imu_n + 1u));
+    if (g_imu == NULL) {
+        die("malloc");
+    }
+    const uint8_t *imu = buf + header_len + (size_t)LHCAP_RECORD_LEN * g_src_n;
+    for (uint32_t i = 0; i < g_imu_n; i++) {
+        for (unsigned k = 0; k < LHB_IMU_WORDS; k++) {
+            g_imu[LHB_IMU_WORDS * i + k] = lhb_get_le32(imu + LHCAP_IMU_RECORD_LEN * i + 4u * k);
+        }
+        if ((i > 0 && g_imu[LHB_IMU_WORDS * i] <= g_imu[LHB_IMU_WORDS * (i - 1u)]) ||
+            g_imu[LHB_IMU_WORDS * i] >= g_hdr.capture_samples) {
+            load_fail("IMU records break the format rules (index order / past the capture)");
+        }
     }
     free(buf);
 }
@@ -430,6 +472,11 @@ int main(int argc, char **argv)
         die("malloc");
     }
     lhb_capture_init(&g_cap, &hw, storage, g_src_n, &g_hdr);
+    uint32_t *imu_storage = malloc(sizeof(uint32_t) * LHB_IMU_WORDS * (g_imu_n + 1u));
+    if (imu_storage == NULL) {
+        die("malloc");
+    }
+    lhb_capture_set_imu(&g_cap, imu_storage, g_imu_n);
     g_cap.fixed_samples = (uint32_t)g_hdr.capture_samples;
     g_cap.fixed_start_time = true;
     lhb_proto_init(&g_proto, &g_cap, g_opt.block_size, tx_bytes, NULL);

@@ -87,6 +87,9 @@ int main(void)
     CHECK_EQ(lhb_get_le32(p + 24), 0);
     CHECK_EQ(lhb_get_le32(p + 32), 1000);
     CHECK_EQ(lhb_get_le32(p + 36), 0);
+    CHECK_EQ(lhb_get_le32(p + 92), 0); /* a version-1 capture: no IMU */
+    CHECK_EQ(lhb_get_le32(p + 96), 0);
+    CHECK_EQ(lhb_get_le32(p + 100), 0);
     send_request(&proto, LHB_CMD_STATUS, 4, req, 3, 0);
     expect_error(LHB_E_LENGTH, LHB_CMD_STATUS, 4);
 

@@ -77,11 +77,17 @@ static void send_status(lhb_proto_t *p, uint8_t type, uint8_t seq, uint32_t now_
         d->isr_cycles_budget, p->frames_timed_out, d->tx_dropped, lhb_proto_blocks_unread(p),
         d->reset_cause,
     };
-    _Static_assert(LHB_STATUS_LEN_V1 + 4u * (sizeof health / sizeof health[0]) == LHB_STATUS_LEN,
-                   "STATUS layout");
+    _Static_assert(LHB_STATUS_LEN_V1 + 4u * (sizeof health / sizeof health[0]) ==
+                       LHB_STATUS_LEN_HEALTH, "STATUS layout");
     for (size_t k = 0; k < sizeof health / sizeof health[0]; k++) {
         lhb_put_le32(s + LHB_STATUS_LEN_V1 + 4u * k, health[k]);
     }
+    /* the IMU: part found at boot (in version-2 captures), records and misses so far */
+    bool imu = c->tmpl.version == LHCAP_VERSION_IMU;
+    lhb_put_le32(s + LHB_STATUS_LEN_HEALTH, imu ? c->tmpl.imu_part : 0u);
+    lhb_put_le32(s + LHB_STATUS_LEN_HEALTH + 4, imu && state != LHB_STATE_IDLE ? c->imu.n : 0u);
+    lhb_put_le32(s + LHB_STATUS_LEN_HEALTH + 8,
+                 imu && state != LHB_STATE_IDLE ? c->imu.missed : 0u);
     send(p, type, seq, s, sizeof s, NULL, 0);
 }
 

@@ -23,6 +23,10 @@
  *   (APB2 90 MHz, OVER8 = 1, USARTDIV = 1.875), to an FT232H with RTS/CTS.
  * - SDRAM: IS42S16320F (4 banks x 8192 rows x 1024 columns x 16 bit = 64 MB) on FMC SDRAM
  *   bank 1 (SDNE0 = PH3, SDCKE0 = PH2, SDNWE = PH5), at 0xC0000000, SDCLK = HCLK/2 = 90 MHz.
+ * - IMU: ICM-42688-P on SPI1 (PA5 SCK, PA6 MISO, PA7 MOSI, AF5; chip select PA4), INT1 on
+ *   PA0 = TIM5_CH1 (AF2); output data rate BOARD_IMU_ODR_HZ (CMake LHB_IMU_ODR_HZ, default
+ *   1000). Its axes are taken as the board frame's (docs/formats/lhcap.md); a board that
+ *   mounts it otherwise states the rotation in its board TOML or lets the solve estimate it.
  * - Status LED: BOARD_LED_PORT / BOARD_LED_PIN (CMake LHB_LED_PORT, LHB_LED_PIN,
  *   LHB_LED_ACTIVE_LOW; default PG13, active high), push-pull output. Patterns: see health.c.
  */
@@ -39,6 +43,9 @@
 #define BOARD_SDRAM_SIZE (64u * 1024u * 1024u)
 #define BOARD_INPUT_INVERT 0x00000000u
 #define BOARD_UART_BAUD 6000000u
+#ifndef BOARD_IMU_ODR_HZ
+#define BOARD_IMU_ODR_HZ 1000u
+#endif
 #ifndef BOARD_LED_PORT
 #define BOARD_LED_PORT PORT_G
 #endif

@@ -39,6 +39,14 @@ void sampler_init(lhb_capture_t *cap);
 int sampler_start(void *ctx, uint32_t n_samples);
 void sampler_stop(void *ctx);
 
+/* The IMU (imu.c): probes and configures it, fills the template's IMU fields (part NONE
+ * when it does not answer); false if there is no working IMU. imu_capture_begin resets the
+ * sample-index counter and enables the data-ready interrupt (called by sampler_start just
+ * before the sampler runs), imu_capture_end disables it. */
+bool imu_init(lhb_capture_t *cap, lhcap_header_t *tmpl);
+void imu_capture_begin(void);
+void imu_capture_end(void);
+
 void uart_init(void);
 bool uart_rx_pop(uint8_t *b);
 void uart_tx(void *ctx, const uint8_t *data, size_t n);

@@ -11,10 +11,13 @@
 #include "lhb/txring.h"
 #include "regs.h"
 
-#define MAX_RECORDS (BOARD_SDRAM_SIZE / 8u)
+#define IMU_STORE_BYTES (2u * 1024u * 1024u) /* 131072 IMU records: 131 s at 1 kHz */
+#define MAX_IMU_RECORDS (IMU_STORE_BYTES / LHCAP_IMU_RECORD_LEN)
+#define MAX_RECORDS ((BOARD_SDRAM_SIZE - IMU_STORE_BYTES) / 8u)
 
-/* edge records: the whole SDRAM, 2 words per record */
+/* the SDRAM: edge records (2 words each), then IMU records (4 words each) */
 static uint32_t record_store[2u * MAX_RECORDS] __attribute__((section(".sdram")));
+static uint32_t imu_store[LHB_IMU_WORDS * MAX_IMU_RECORDS] __attribute__((section(".sdram")));
 static lhb_capture_t capture;
 static lhb_proto_t proto;
 
@@ -37,6 +40,8 @@ int main(void)
     sampler_init(&capture);
 
     lhcap_header_t t = {0};
+    t.version = LHCAP_VERSION_IMU;
+    (void)imu_init(&capture, &t); /* no IMU: the header's imu_part says so */
     t.sample_rate = LHB_SAMPLE_RATE_HZ;
     t.board_id = board_id();
     t.fw_version = LHB_FW_VERSION;
@@ -45,6 +50,7 @@ int main(void)
     }
     lhb_hw_t hw = {sampler_start, sampler_stop, NULL};
     lhb_capture_init(&capture, &hw, sdram_ok ? record_store : 0, sdram_ok ? MAX_RECORDS : 0u, &t);
+    lhb_capture_set_imu(&capture, sdram_ok ? imu_store : 0, sdram_ok ? MAX_IMU_RECORDS : 0u);
     lhb_proto_init(&proto, &capture, LHB_BLOCK_SIZE_DEFAULT, uart_tx, NULL);
     proto.diag = &g_diag;
 

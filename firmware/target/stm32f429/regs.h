@@ -30,9 +30,11 @@ _Static_assert(__builtin_offsetof(rcc_t, CSR) == 0x74u, "RCC_CSR offset (RM0090 
 #define RCC_AHB1ENR_GPIO(n) (1u << (n)) /* A = 0 ... K = 10 */
 #define RCC_AHB1ENR_DMA2EN (1u << 22)
 #define RCC_AHB3ENR_FMCEN (1u << 0)
+#define RCC_APB1ENR_TIM5EN (1u << 3)
 #define RCC_APB1ENR_PWREN (1u << 28)
 #define RCC_APB2ENR_TIM8EN (1u << 1)
 #define RCC_APB2ENR_USART1EN (1u << 4)
+#define RCC_APB2ENR_SPI1EN (1u << 12)
 #define RCC_APB2ENR_TIM11EN (1u << 18)
 
 typedef struct {
@@ -64,9 +66,17 @@ typedef struct {
     REG CR1, CR2, SMCR, DIER, SR, EGR, CCMR1, CCMR2, CCER, CNT, PSC, ARR, RCR, CCR1, CCR2, CCR3,
         CCR4, BDTR, DCR, DMAR, OR;
 } tim_t;
+#define TIM5 ((tim_t *)0x40000C00u) /* 32-bit */
 #define TIM8 ((tim_t *)0x40010400u)
 #define TIM11 ((tim_t *)0x40014800u)
 #define TIM_SR_CC1IF (1u << 1)
+#define TIM_SR_CC1OF (1u << 9)
+#define TIM_CR2_MMS_UPDATE (2u << 4) /* TRGO = update event */
+#define TIM_SMCR_SMS_EXT1 (7u << 0)  /* external clock mode 1: count TRGI edges */
+#define TIM_SMCR_TS_ITR3 (3u << 4)   /* TIM5's ITR3 = TIM8_TRGO (RM0090 table 98) */
+#define TIM_CCMR1_CC1S_TI1 (1u << 0) /* CC1 input capture of TI1 */
+#define TIM_CCER_CC1E (1u << 0)      /* CC1P = 0: rising edge */
+#define TIM_DIER_CC1IE (1u << 1)
 #define TIM11_OR_TI1_HSE_RTC (2u << 0) /* TI1_RMP = 10: HSE_RTC (RM0090 18.5.11) */
 _Static_assert(__builtin_offsetof(tim_t, OR) == 0x50u, "TIMx_OR offset");
 #define TIM_CR1_CEN (1u << 0)
@@ -103,6 +113,21 @@ typedef struct {
 #define DMA_FLAG_HT 0x10u
 #define DMA_FLAG_TC 0x20u
 #define DMA_FLAGS_ALL 0x3Du
+
+typedef struct {
+    REG CR1, CR2, SR, DR, CRCPR, RXCRCR, TXCRCR, I2SCFGR, I2SPR;
+} spi_t;
+#define SPI1 ((spi_t *)0x40013000u)
+#define SPI_CR1_CPHA (1u << 0)
+#define SPI_CR1_CPOL (1u << 1)
+#define SPI_CR1_MSTR (1u << 2)
+#define SPI_CR1_BR_DIV8 (2u << 3)
+#define SPI_CR1_SPE (1u << 6)
+#define SPI_CR1_SSI (1u << 8)
+#define SPI_CR1_SSM (1u << 9)
+#define SPI_SR_RXNE (1u << 0)
+#define SPI_SR_TXE (1u << 1)
+#define SPI_SR_BSY (1u << 7)
 
 typedef struct {
     REG SR, DR, BRR, CR1, CR2, CR3, GTPR;
@@ -156,6 +181,7 @@ typedef struct {
 
 /* IRQ numbers used here (RM0090 vector table) */
 #define IRQ_USART1 37
+#define IRQ_TIM5 50
 #define IRQ_DMA2_STREAM2 58
 
 static inline void nvic_enable(int irq, uint8_t prio)

@@ -77,6 +77,7 @@ int sampler_start(void *ctx, uint32_t n_samples)
     sampler_stop(NULL);
     lhb_halves_init(&g_halves);
     TIM8->CR1 = TIM_CR1_URS;
+    TIM8->CR2 = TIM_CR2_MMS_UPDATE; /* TRGO: TIM5 counts samples for the IMU's stamps */
     TIM8->PSC = 0;
     TIM8->ARR = TIM8_ARR;
     TIM8->CCMR1 = 0; /* CC1 as frozen output compare: only its event is used */
@@ -92,6 +93,7 @@ int sampler_start(void *ctx, uint32_t n_samples)
     DMA2->S[S_HI].CR |= DMA_CR_EN;
     nvic_enable(IRQ_DMA2_STREAM2, 1u);
     TIM8->DIER = TIM_DIER_UDE | TIM_DIER_CC1DE;
+    imu_capture_begin(); /* after UG (which TIM5 would count), before the first sample */
     TIM8->CR1 |= TIM_CR1_CEN;
     return 0;
 }
@@ -101,6 +103,7 @@ void sampler_stop(void *ctx)
     (void)ctx;
     TIM8->CR1 &= ~TIM_CR1_CEN;
     TIM8->DIER = 0;
+    imu_capture_end();
     nvic_disable(IRQ_DMA2_STREAM2);
     stream_off(S_LO);
     stream_off(S_HI);

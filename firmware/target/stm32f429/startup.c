@@ -12,6 +12,7 @@ void Reset_Handler(void);
 void SysTick_Handler(void);
 void USART1_IRQHandler(void);
 void DMA2_Stream2_IRQHandler(void);
+void TIM5_IRQHandler(void);
 void fault_entry(void); /* health.c: records the fault for the next boot, then resets */
 
 void Reset_Handler(void)
@@ -46,5 +47,6 @@ __attribute__((section(".isr_vector"), used)) const vector_t vector_table[N_VECT
     [15] = SysTick_Handler,
     [16 + IRQ_USART1] = USART1_IRQHandler,
     [16 + IRQ_DMA2_STREAM2] = DMA2_Stream2_IRQHandler,
+    [16 + IRQ_TIM5] = TIM5_IRQHandler,
 };
 #pragma GCC diagnostic pop

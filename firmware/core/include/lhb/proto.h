@@ -16,7 +16,8 @@ typedef void (*lhb_tx_fn)(void *ctx, const uint8_t *data, size_t n);
 /* Payload sizes of the fixed-size messages. */
 #define LHB_INFO_LEN 28u
 #define LHB_STATUS_LEN_V1 40u /* the first firmware's STATUS; the health fields follow */
-#define LHB_STATUS_LEN 92u
+#define LHB_STATUS_LEN_HEALTH 92u /* + the health fields; the IMU fields follow */
+#define LHB_STATUS_LEN 104u
 #define LHB_ARM_LEN 16u
 #define LHB_ARM_LEN_FLAGS 20u /* ARM + u32 flags */
 #define LHB_ARM_DISCARD 0x1u  /* ARM flag: drop a capture that was not downloaded */
