@@ -161,6 +161,8 @@ def test_status_parse_first_firmware_and_health_fields() -> None:
     health = struct.pack("<13I", 0x010 | 0x020, 7999, 0x08001234, 0xFFFFFFF9, 0x400, 0x40000000,
                          2, 51_000, 184_320, 1, 0, 1, 0x24)
     st = BoardStatus.parse(v1 + health + b"future")  # later firmware may append more
+    assert (st.imu_part, st.imu_records, st.imu_missed) == (0, 0, 0)
+    assert BoardStatus.parse(v1 + health + struct.pack("<3I", 1, 900, 2)).imu_records == 900
     assert st.health_reported and st.hse_khz == 7999 and st.fault_pc == 0x08001234
     assert st.isr_cycles_max == 51_000 and st.isr_cycles_budget == 184_320
     assert st.blocks_unread == 1 and st.frames_timed_out == 1
@@ -244,6 +246,35 @@ def test_download_api_byte_identical(virtual_board: Path, capture: tuple[Path, b
     assert seen[-1] == ("download", len(data), len(data))
     assert any(phase == "capture" for phase, _, _ in seen)
     assert not list(tmp_path.glob(".*.part"))
+
+
+def test_version_2_capture_with_imu_records_byte_identical(virtual_board: Path,
+                                                           tmp_path: Path) -> None:
+    # the board core builds a version-2 image itself (its IMU log, header and CRC) from the
+    # replayed samples and IMU records: it must equal the file the Python encoder wrote
+    import numpy as np
+
+    from lhgraph.signal.capture import Capture, encode_capture
+    from lhgraph.signal.capture_imu import CaptureImu
+
+    rng = np.random.default_rng(3)
+    index = np.r_[0, np.sort(rng.choice(np.arange(1, 400_000), 2999, replace=False))]
+    words = np.cumsum(rng.integers(1, 2**31, 3000)).astype(np.uint32)
+    imu = CaptureImu(np.arange(700, 400_000, 2000), rng.integers(-32768, 32768, (200, 6)),
+                     missed=3)
+    src = tmp_path / "imu.lhcap"
+    data = encode_capture(Capture(index, words, 400_001, imu=imu, board_id=9))
+    src.write_bytes(data)
+    out = tmp_path / "out.lhcap"
+    with board(virtual_board, src) as port:
+        result = fetch(port, out)
+        with BoardLink(port) as link:
+            st = link.status()
+    assert out.read_bytes() == data
+    assert (st.imu_part, st.imu_records, st.imu_missed) == (1, 200, 3)
+    assert result.n_records == 3000 and result.n_imu_records == 200 and result.imu_missed == 3
+    assert "3000 edge records, 200 IMU samples" in result.summary()
+    assert "3 IMU samples missed" in result.summary()
 
 
 def test_cli_byte_identical(virtual_board: Path, capture: tuple[Path, bytes],

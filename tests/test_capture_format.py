@@ -11,17 +11,20 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lhgraph.errors import InputError
+from lhgraph.io.imu import STANDARD_GRAVITY_MPS2, ImuStream
 from lhgraph.signal.capture import (
     Capture,
     decode_capture_bytes,
     edges_from_words,
     edges_to_pulses,
     encode_capture,
+    file_layout,
     pulses_to_edges,
     read_capture,
     read_raw_dump,
     write_capture,
 )
+from lhgraph.signal.capture_imu import CaptureImu
 from lhgraph.signal.pulses import LightPulses
 
 
@@ -119,7 +122,7 @@ def test_crc_mismatch_reported_and_bad_records_dropped():
 
 @pytest.mark.parametrize("mutate, message", [
     (lambda d: b"XXXX" + d[4:], "wrong magic"),
-    (lambda d: d[:4] + struct.pack("<H", 2) + d[6:], "unknown .lhcap version"),
+    (lambda d: d[:4] + struct.pack("<H", 3) + d[6:], "unknown .lhcap version"),
     (lambda d: d[:6] + struct.pack("<H", 50) + d[8:], "shorter than"),
     (lambda d: d + b"\0" * 8, "records need"),
     (lambda d: d[:60], "inside the header"),
@@ -129,6 +132,93 @@ def test_bad_headers_raise(mutate, message):
     cap = Capture(np.array([0, 5]), np.array([0, 1]), 9)
     with pytest.raises(InputError, match=message):
         decode_capture_bytes(mutate(encode_capture(cap)), "x.lhcap")
+
+
+def _imu_capture(m: int = 50, seed: int = 6) -> Capture:
+    """A random capture with ``m`` IMU samples (version 2)."""
+    rng = np.random.default_rng(seed)
+    cap = pulses_to_edges(_random_pulses(rng), 60_000)
+    index = np.sort(rng.choice(60_000, m, replace=False))
+    cap.imu = CaptureImu(index, rng.integers(-32768, 32768, (m, 6)), odr_hz=1000, missed=0)
+    return cap
+
+
+def test_version_2_layout_and_round_trip(tmp_path):
+    cap = Capture(np.array([0, 5]), np.array([0, 0b101]), 9, channel_map=np.arange(32),
+                  imu=CaptureImu([3, 7], [[1, -2, 3, -4, 5, -6], [7, 8, 9, 10, 11, 12]],
+                                 odr_hz=500, missed=4))
+    data = encode_capture(cap)
+    # docs/formats/lhcap.md: version 2, 128-byte header, the IMU fields at 108
+    assert struct.unpack_from("<HH", data, 4) == (2, 128)
+    assert struct.unpack_from("<IIHHHHI", data, 108) == (2, 4, 1, 500, 2000, 16, 0)
+    assert struct.unpack_from("<4I", data, 128) == (0, 0, 5, 5)
+    assert struct.unpack_from("<I6h", data, 144) == (3, 1, -2, 3, -4, 5, -6)
+    assert struct.unpack_from("<I6h", data, 160) == (7, 7, 8, 9, 10, 11, 12)
+    assert len(data) == 128 + 16 + 32 + 4
+    assert struct.unpack_from("<I", data, len(data) - 4)[0] == zlib.crc32(data[:-4])
+    assert file_layout(data) == (2, 2, 2, len(data))
+    back, warnings = decode_capture_bytes(data)
+    assert warnings == ["the board missed 4 IMU samples while capturing"]
+    assert back.imu is not None and np.array_equal(back.imu.raw, cap.imu.raw)
+    assert (back.imu.part_name, back.imu.odr_hz, back.imu.missed) == ("ICM-42688-P", 500, 4)
+    big = _imu_capture()
+    back, warnings = read_capture(write_capture(big, tmp_path / "imu.lhcap"))
+    assert warnings == []
+    assert np.array_equal(back.sample_index, big.sample_index)
+    assert np.array_equal(back.imu.sample_index, big.imu.sample_index)
+    assert np.array_equal(back.imu.raw, big.imu.raw)
+    # without an IMU the file stays version 1, byte for byte as before
+    big.imu = None
+    assert encode_capture(big)[4:8] == struct.pack("<HH", 1, 108)
+
+
+def test_version_2_truncated_or_corrupted_keeps_what_is_valid():
+    cap = _imu_capture()
+    data = encode_capture(cap)
+    n = len(cap)
+    back, warnings = decode_capture_bytes(data[:-4 - 16 * 20 - 5])  # 20.3 IMU records short
+    assert len(back) == n and len(back.imu) == 29
+    assert warnings[0].startswith(f"truncated: {n} of {n} edge records, 29 of 50 IMU records")
+    assert np.array_equal(back.imu.raw, cap.imu.raw[:29])
+    back, warnings = decode_capture_bytes(data[:128 + 8 * 10 + 3])  # inside the edge records
+    assert len(back) == 10 and len(back.imu) == 0
+    assert "10 of" in warnings[0] and "0 of 50 IMU records" in warnings[0]
+    broken = bytearray(data)
+    struct.pack_into("<I", broken, 128 + 8 * n + 16 * 30, 0)  # IMU record 30 goes back
+    back, warnings = decode_capture_bytes(bytes(broken))
+    assert any("CRC" in w for w in warnings)
+    assert any(w.startswith("IMU record 30 breaks the ordering rules") and "the 19 after" in w
+               for w in warnings)
+    assert len(back.imu) == 30 and len(back) == n
+    struct.pack_into("<I", broken, 128 + 8 * n + 16 * 30, 60_000)  # past the capture's end
+    back, warnings = decode_capture_bytes(bytes(broken))
+    assert len(back.imu) == 30
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda d: d[:6] + struct.pack("<H", 108) + d[8:], "shorter than 128 .version 2"),
+    (lambda d: d[:116] + struct.pack("<H", 9) + d[118:], "unknown IMU part 9"),
+    (lambda d: d[:120] + struct.pack("<H", 0) + d[122:], "IMU full scale is 0"),
+    (lambda d: d + b"\0" * 16, "and 50 IMU records need"),
+])
+def test_version_2_bad_headers_raise(mutate, message):
+    with pytest.raises(InputError, match=message):
+        decode_capture_bytes(mutate(encode_capture(_imu_capture())))
+
+
+def test_imu_counts_and_si_units():
+    t = np.array([0.0, 0.001, 0.0015, 0.002])
+    accel = np.array([[0, 0, STANDARD_GRAVITY_MPS2], [1, -1, 0], [200, 0, 0], [0, 0, 0]])
+    gyro = np.array([[0, 0, 0], [0.5, -0.5, 1], [0, 0, 0], [0, 0, -50.0]])
+    imu = CaptureImu.from_stream(ImuStream(t, accel, gyro), 2_000_000)
+    assert imu.sample_index.tolist() == [0, 2000, 3000, 4000]
+    assert imu.raw[0].tolist() == [0, 0, 2048, 0, 0, 0]  # 1 g = 32768 / 16 counts
+    assert imu.raw[2, 0] == 32767 and imu.raw[3, 5] == -32768  # saturated at the full scale
+    back = imu.stream(2_000_000)
+    assert np.allclose(back.time, t)
+    ok = slice(0, 2)
+    assert np.abs(back.accel_mps2[ok] - accel[ok]).max() <= 16 * STANDARD_GRAVITY_MPS2 / 65536
+    assert np.abs(back.gyro_rad_s[ok] - gyro[ok]).max() <= np.radians(2000) / 65536
 
 
 def test_read_capture_missing_file(tmp_path):

@@ -14,8 +14,8 @@ from lhgraph.cli.common import COMMANDS, add_common_output
 def add_decode(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("decode", help="decode a capture into angles and OOTX calibration",
                        description="Decode a board capture (.lhcap), a raw sample dump or a "
-                       "libsurvive recording into DIR/angles.csv and DIR/ootx.toml "
-                       "(docs/decoding.md).")
+                       "libsurvive recording into DIR/angles.csv, DIR/ootx.toml and (a "
+                       "capture with IMU records) DIR/imu.csv (docs/decoding.md).")
     p.add_argument("capture", help="capture file")
     p.add_argument("--output", "-o", required=True, help="output directory")
     p.add_argument("--format", choices=FORMATS,

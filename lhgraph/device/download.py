@@ -36,9 +36,7 @@ from lhgraph.device.protocol import (
 )
 from lhgraph.errors import DeviceError, InputError
 from lhgraph.io.files import check_writable, write_atomic
-
-HEADER_LEN = 108
-"""Length of the ``.lhcap`` header (docs/formats/lhcap.md)."""
+from lhgraph.signal.capture import HEADER_LEN, file_layout
 
 
 @dataclass(frozen=True)
@@ -60,6 +58,8 @@ class CaptureDownload:
     capture_s: float
     download_s: float
     board_problems: tuple[str, ...] = ()
+    n_imu_records: int = 0
+    imu_missed: int = 0
 
     @property
     def duration_s(self) -> float:
@@ -70,9 +70,12 @@ class CaptureDownload:
         """One line for humans."""
         rate = self.size_bytes / self.download_s / 1e3 if self.download_s > 0 else float("inf")
         extra = "; OVERFLOWED (capture stopped early)" if self.overflowed else ""
+        if self.imu_missed:
+            extra += f"; {self.imu_missed} IMU samples missed"
+        imu = f", {self.n_imu_records} IMU samples" if self.n_imu_records else ""
         if self.board_problems:
             extra += "; BOARD: " + "; ".join(self.board_problems)
-        return (f"wrote {self.path}: {self.n_records} edge records, {self.duration_s:.3f} s, "
+        return (f"wrote {self.path}: {self.n_records} edge records{imu}, {self.duration_s:.3f} s, "
                 f"{self.size_bytes} bytes in {self.download_s:.2f} s ({rate:.0f} kB/s), "
                 f"{self.blocks_rerequested} blocks re-requested, "
                 f"{self.reconnects} reconnects{extra}")
@@ -89,15 +92,17 @@ def _check_image(data: bytes, status: BoardStatus) -> str | None:
     if crc != trailer or crc != status.image_crc:
         return (f"whole-capture CRC mismatch (computed 0x{crc:08x}, file 0x{trailer:08x}, "
                 f"board 0x{status.image_crc:08x})")
-    (n_records,) = struct.unpack_from("<I", data, 40)
-    if len(data) != HEADER_LEN + 8 * n_records + 4:
-        return "record count disagrees with the size"
+    layout = file_layout(data)
+    if layout is None:
+        return "not a version-1 or version-2 .lhcap header"
+    if len(data) != layout[3]:
+        return "record counts disagree with the size"
     return None
 
 
 def _validate_ready(status: BoardStatus) -> None:
     size, bsize = status.image_size, status.block_size
-    if size < HEADER_LEN + 4 or (size - HEADER_LEN - 4) % 8 != 0:
+    if size < HEADER_LEN + 4 or size % 4 != 0:  # version 1: 112 + 8 N, 2: 132 + 8 N + 16 M
         raise DeviceError(f"board announces an impossible capture size ({size} bytes)")
     if not 1 <= bsize <= 65531 or status.block_count != -(-size // bsize):
         raise DeviceError(f"board announces inconsistent blocks ({status.block_count} x "
@@ -173,9 +178,11 @@ def download_capture(port: str, output_path: str | os.PathLike[str], duration_s:
     flags, board_id, fw = struct.unpack_from("<III", data, 12)
     (sample_rate,) = struct.unpack_from("<I", data, 8)
     (samples,) = struct.unpack_from("<Q", data, 32)
-    (n_records,) = struct.unpack_from("<I", data, 40)
+    _, n_records, n_imu, _ = file_layout(data) or (0, 0, 0, 0)
+    imu_missed = struct.unpack_from("<I", data, HEADER_LEN + 4)[0] if n_imu else 0
     return CaptureDownload(
-        path=output, size_bytes=len(data), n_records=n_records, capture_samples=samples,
+        path=output, size_bytes=len(data), n_records=n_records, n_imu_records=n_imu,
+        imu_missed=imu_missed, capture_samples=samples,
         sample_rate_hz=sample_rate, board_id=board_id, firmware_version=fw,
         overflowed=bool(flags & 1), crc32=status.image_crc, blocks=status.block_count,
         blocks_rerequested=rerequested, reconnects=link.reconnects, capture_s=capture_s,

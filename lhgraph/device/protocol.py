@@ -133,6 +133,7 @@ def decode_frame(encoded: bytes) -> Frame:
 _INFO = struct.Struct("<HHIIIIII")
 _STATUS = struct.Struct("<BBHIIIIIIIII")
 _HEALTH = struct.Struct("<13I")
+_IMU_STATUS = struct.Struct("<3I")
 
 
 def _unpack_answer(name: str, layout: struct.Struct, payload: bytes) -> tuple[int, ...]:
@@ -166,8 +167,9 @@ class BoardStatus:
     """Answer to STATUS (also to ARM and ABORT).
 
     The first 40 bytes are every firmware's; the health fields (bytes 40..91) come from
-    firmware that reports them (``health_reported``) and are 0 otherwise. Cycle counts are
-    CPU cycles at 180 MHz.
+    firmware that reports them (``health_reported``) and are 0 otherwise, as are the IMU
+    fields (bytes 92..103: the IMU part found at boot, 0 = none; IMU records and missed
+    samples of the current capture). Cycle counts are CPU cycles at 180 MHz.
     """
 
     state: int
@@ -196,17 +198,24 @@ class BoardStatus:
     blocks_unread: int = 0
     reset_cause: int = 0
     health_reported: bool = False
+    imu_part: int = 0
+    imu_records: int = 0
+    imu_missed: int = 0
 
     @classmethod
     def parse(cls, payload: bytes) -> BoardStatus:
-        """Decode a STATUS payload: 40 bytes, or 92 or more with the health fields."""
+        """Decode a STATUS payload: 40 bytes, or 92 or more with the health fields (and
+        104 or more with the IMU fields)."""
         if len(payload) == _STATUS.size:
             return cls(*_STATUS.unpack(payload))
-        if len(payload) < _STATUS.size + _HEALTH.size:
+        health_end = _STATUS.size + _HEALTH.size
+        if len(payload) < health_end:
             raise DeviceError(f"STATUS answer has {len(payload)} bytes, expected "
-                              f"{_STATUS.size} or at least {_STATUS.size + _HEALTH.size}")
+                              f"{_STATUS.size} or at least {health_end}")
+        imu = (_IMU_STATUS.unpack_from(payload, health_end)
+               if len(payload) >= health_end + _IMU_STATUS.size else (0, 0, 0))
         return cls(*_STATUS.unpack_from(payload), *_HEALTH.unpack_from(payload, _STATUS.size),
-                   health_reported=True)
+                   True, *imu)
 
     @property
     def state_name(self) -> str:

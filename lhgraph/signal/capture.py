@@ -3,8 +3,9 @@
 A capture is the 32 photodiode lines sampled together (2 MHz on the board), stored as
 *edges*: the sample index at which the 32-bit port word changed and the new word
 (docs/formats/lhcap.md). Bit ``k`` of a word is 1 while the sensor on channel ``k`` sees light;
-``channel_map[k]`` is that sensor's id (-1 = unused bit). Times are in samples of the board's
-clock throughout.
+``channel_map[k]`` is that sensor's id (-1 = unused bit). A version-2 file adds the board
+IMU's samples (:class:`CaptureImu`), each stamped with the sample index of its data-ready.
+Times are in samples of the board's clock throughout.
 """
 
 from __future__ import annotations
@@ -19,16 +20,20 @@ from numpy.typing import ArrayLike, NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.io.files import read_input, write_atomic
+from lhgraph.signal.capture_imu import IMU_PARTS, IMU_RECORD, CaptureImu, read_imu_records
 from lhgraph.signal.pulses import LightPulses
 
 MAGIC = b"LHCP"
 VERSION = 1
+VERSION_IMU = 2
 HEADER_LEN = 108
+HEADER_LEN_IMU = 128
 N_CHANNELS = 32
 FLAG_OVERFLOW = 1
 _HEADER = struct.Struct("<4sHHIIIIQQI32h")
+_HEADER_IMU = struct.Struct("<IIHHHHI")  # bytes 108..127 of a version-2 header
 _RECORD = np.dtype([("sample_index", "<u4"), ("port_word", "<u4")])
-assert _HEADER.size == HEADER_LEN
+assert _HEADER.size == HEADER_LEN and HEADER_LEN + _HEADER_IMU.size == HEADER_LEN_IMU
 
 
 def identity_channel_map() -> NDArray[np.int16]:
@@ -54,6 +59,8 @@ class Capture:
     board_id: int = 0
     firmware_version: int = 0
     start_time_us: int = 0
+    imu: CaptureImu | None = None
+    """The board IMU's samples (a version-2 file); None: a version-1 file."""
 
     def __post_init__(self) -> None:
         self.sample_index = np.asarray(self.sample_index, dtype=np.int64)
@@ -75,18 +82,44 @@ class Capture:
 
 
 def encode_capture(capture: Capture) -> bytes:
-    """The ``.lhcap`` bytes of a capture (header, records, CRC-32)."""
+    """The ``.lhcap`` bytes of a capture (header, records, [IMU records,] CRC-32): version 1
+    without ``capture.imu``, version 2 with it."""
     n = len(capture)
+    imu = capture.imu
     header = _HEADER.pack(
-        MAGIC, VERSION, HEADER_LEN, int(capture.sample_rate_hz), int(capture.flags),
-        int(capture.board_id), int(capture.firmware_version), int(capture.start_time_us),
-        int(capture.length_samples), n, *[int(c) for c in capture.channel_map],
+        MAGIC, VERSION if imu is None else VERSION_IMU,
+        HEADER_LEN if imu is None else HEADER_LEN_IMU, int(capture.sample_rate_hz),
+        int(capture.flags), int(capture.board_id), int(capture.firmware_version),
+        int(capture.start_time_us), int(capture.length_samples), n,
+        *[int(c) for c in capture.channel_map],
     )
     records = np.empty(n, dtype=_RECORD)
     records["sample_index"] = capture.sample_index
     records["port_word"] = capture.port_word
     body = header + records.tobytes()
+    if imu is not None:
+        imu_records = np.empty(len(imu), dtype=IMU_RECORD)
+        imu_records["sample_index"] = imu.sample_index
+        imu_records["raw"] = imu.raw
+        body = (header + _HEADER_IMU.pack(len(imu), imu.missed, imu.part, imu.odr_hz,
+                                          imu.gyro_full_scale_dps, imu.accel_full_scale_g, 0)
+                + records.tobytes() + imu_records.tobytes())
     return body + struct.pack("<I", zlib.crc32(body))
+
+
+def file_layout(data: bytes) -> tuple[int, int, int, int] | None:
+    """``(version, edge records, IMU records, file size they need)`` from the start of
+    ``.lhcap`` bytes (its header), or None when that is no known header."""
+    if len(data) < HEADER_LEN or data[:4] != MAGIC:
+        return None
+    version, header_len = struct.unpack_from("<HH", data, 4)
+    (n,) = struct.unpack_from("<I", data, 40)
+    if version == VERSION and header_len >= HEADER_LEN:
+        return version, n, 0, header_len + 8 * n + 4
+    if version == VERSION_IMU and header_len >= HEADER_LEN_IMU and len(data) >= HEADER_LEN_IMU:
+        (m,) = struct.unpack_from("<I", data, HEADER_LEN)
+        return version, n, m, header_len + 8 * n + 16 * m + 4
+    return None
 
 
 def write_capture(capture: Capture, path: str | Path, overwrite: bool = False) -> Path:
@@ -108,15 +141,23 @@ def check_capture(capture: Capture, source: str | Path | None = None) -> None:
         raise InputError("capture length must exceed the last edge's sample index", source)
     if idx[-1] >= 2**32:
         raise InputError("sample index does not fit in u32", source)
+    imu = capture.imu
+    if imu is not None:
+        if len(imu) and (np.any(np.diff(imu.sample_index) <= 0) or imu.sample_index[0] < 0
+                         or imu.sample_index[-1] >= capture.length_samples):
+            raise InputError("IMU sample indices must strictly increase within the capture",
+                             source)
+        if imu.part not in IMU_PARTS and (imu.part != 0 or len(imu)):
+            raise InputError(f"unknown IMU part {imu.part}", source)
 
 
 def read_capture(path: str | Path) -> tuple[Capture, list[str]]:
-    """Read a ``.lhcap`` file -> (capture, warnings).
+    """Read a ``.lhcap`` file (version 1, or 2 with IMU records) -> (capture, warnings).
 
-    A wrong magic, unknown version, short header or a file longer than its record count
-    says raise InputError. A truncated record list, a CRC mismatch, or records that break
-    the ordering rules are reported in ``warnings``; the valid records (the longest valid
-    prefix) are kept.
+    A wrong magic, unknown version, short header, unknown IMU part or a file longer than its
+    record counts say raise InputError. A truncated record list, a CRC mismatch, records
+    that break the ordering rules, or IMU samples the board missed are reported in
+    ``warnings``; the valid records (the longest valid prefix of each list) are kept.
     """
     path = Path(path)
     return decode_capture_bytes(read_input(path, "a .lhcap file"), path)
@@ -124,14 +165,16 @@ def read_capture(path: str | Path) -> tuple[Capture, list[str]]:
 
 def decode_capture_bytes(data: bytes, source: str | Path | None = None
                          ) -> tuple[Capture, list[str]]:
-    """Parse ``.lhcap`` bytes (see :func:`read_capture`)."""
+    """Parse ``.lhcap`` bytes of version 1 or 2 (see :func:`read_capture`)."""
     if len(data) < 8 or data[:4] != MAGIC:
         raise InputError("not an .lhcap file (wrong magic)", source)
     version, header_len = struct.unpack_from("<HH", data, 4)
-    if version != VERSION:
+    if version not in (VERSION, VERSION_IMU):
         raise InputError(f"unknown .lhcap version {version}", source)
-    if header_len < HEADER_LEN:
-        raise InputError(f"header length {header_len} is shorter than {HEADER_LEN}", source)
+    need = HEADER_LEN if version == VERSION else HEADER_LEN_IMU
+    if header_len < need:
+        raise InputError(f"header length {header_len} is shorter than {need} "
+                         f"(version {version})", source)
     if len(data) < header_len:
         raise InputError("file ends inside the header", source)
     fields = _HEADER.unpack_from(data, 0)
@@ -139,17 +182,26 @@ def decode_capture_bytes(data: bytes, source: str | Path | None = None
     channel_map = np.array(fields[10:], dtype=np.int16)
     if rate == 0:
         raise InputError("sample rate is 0", source)
+    m, missed, part, odr, gyro_fs, accel_fs = (
+        _HEADER_IMU.unpack_from(data, HEADER_LEN)[:6] if version == VERSION_IMU else (0,) * 6)
+    if part not in IMU_PARTS and (part != 0 or m):
+        raise InputError(f"unknown IMU part {part}", source)
+    if m and (gyro_fs == 0 or accel_fs == 0):
+        raise InputError("IMU full scale is 0", source)
     warnings: list[str] = []
-    expected = header_len + 8 * n + 4
+    imu_bytes = 16 * m
+    expected = header_len + 8 * n + imu_bytes + 4
     if len(data) > expected:
-        raise InputError(f"file has {len(data)} bytes but {n} records need {expected}", source)
-    available = (len(data) - header_len) // 8
+        need_what = f"{n} records" + (f" and {m} IMU records" if m else "")
+        raise InputError(f"file has {len(data)} bytes but {need_what} need {expected}", source)
+    n_kept, m_kept = n, m
     if len(data) < expected:
-        n_kept = min(n, available)
-        warnings.append(f"truncated: {n_kept} of {n} edge records present, CRC missing; "
-                        "kept the complete records")
+        n_kept = min(n, (len(data) - header_len) // 8)
+        m_kept = min(m, max(len(data) - header_len - 8 * n, 0) // 16)
+        imu_note = f", {m_kept} of {m} IMU records" if m else ""
+        warnings.append(f"truncated: {n_kept} of {n} edge records{imu_note} present, CRC "
+                        "missing; kept the complete records")
     else:
-        n_kept = n
         (crc,) = struct.unpack_from("<I", data, expected - 4)
         if zlib.crc32(data[:expected - 4]) != crc:
             warnings.append("CRC-32 mismatch: the file is corrupted; kept the records that "
@@ -169,8 +221,15 @@ def decode_capture_bytes(data: bytes, source: str | Path | None = None
         warnings.append(f"capture length {length} does not exceed the last edge "
                         f"{idx[-1]}; set to last edge + 1")
         length = int(idx[-1]) + 1
+    imu = None
+    if version == VERSION_IMU:
+        imu = read_imu_records(data, header_len + 8 * n, m_kept, int(length), warnings)
+        imu.part, imu.odr_hz, imu.missed = int(part), int(odr), int(missed)
+        imu.gyro_full_scale_dps, imu.accel_full_scale_g = int(gyro_fs), int(accel_fs)
+        if missed:
+            warnings.append(f"the board missed {missed} IMU samples while capturing")
     capture = Capture(idx, words, int(length), int(rate), channel_map, int(flags),
-                      int(board_id), int(fw), int(start_us))
+                      int(board_id), int(fw), int(start_us), imu)
     if capture.overflowed:
         warnings.append("the board's memory overflowed: the capture stopped early")
     return capture, warnings

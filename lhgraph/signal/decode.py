@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from lhgraph.choices import PERIODS, SYNCS
 from lhgraph.errors import InputError
 from lhgraph.io.angles import Angles
+from lhgraph.io.imu import ImuStream
 from lhgraph.model.board import Board
 from lhgraph.model.calibration import StationCalibration
 from lhgraph.signal.capture import Capture, edges_to_pulses, toggles_per_channel
@@ -81,16 +82,20 @@ class DecodeOptions:
 @dataclass
 class DecodeResult:
     """Decoded sweep angles (with an int column ``sweep`` = slot counter), the factory
-    calibration of every station whose OOTX frame decoded, and the report."""
+    calibration of every station whose OOTX frame decoded, the report, and the capture's
+    IMU samples in ``imu.csv``'s units on the angles' clock (None: the recording has none)."""
 
     angles: Angles
     calibrations: dict[int, StationCalibration]
     report: DecodeReport
+    imu: ImuStream | None = None
 
 
 def decode_capture(capture: Capture, board: Board | None = None,
                    options: DecodeOptions | None = None) -> DecodeResult:
-    """Decode a board capture (edge records) into angles, OOTX calibration and a report.
+    """Decode a board capture (edge records) into angles, OOTX calibration and a report;
+    a version-2 capture's IMU samples become ``result.imu`` (time = sample index / rate, the
+    angles' clock).
 
     Channels with more edges than one per :data:`NOISE_SAMPLES_PER_EDGE` samples are left
     out before pulses are built (reported), which also bounds the work on input that is not
@@ -104,6 +109,15 @@ def decode_capture(capture: Capture, board: Board | None = None,
     result.report.drop(f"edges of channels with more than one edge per {NOISE_SAMPLES_PER_EDGE} "
                        f"samples (noise; channels {np.flatnonzero(noisy)[:8].tolist()})",
                        int(edges[noisy].sum()))
+    imu = capture.imu
+    if imu is not None and len(imu):
+        result.imu = imu.stream(capture.sample_rate_hz)
+        result.report.notes.append(
+            f"IMU: {len(imu)} samples of the {imu.part_name} at {imu.odr_hz} Hz"
+            + (f" ({imu.missed} missed by the board)" if imu.missed else ""))
+    elif imu is not None:
+        result.report.notes.append("IMU: none in the capture"
+                                   + (" (the board found no IMU)" if imu.part == 0 else ""))
     return result
 
 

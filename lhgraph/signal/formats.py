@@ -3,7 +3,8 @@
 Kinds (:data:`FORMATS`): ``lhcap``, the board's edge-record file (docs/formats/lhcap.md);
 ``raw``, a raw sample dump (a u32 port word per sample, no header); ``libsurvive``, the raw
 light of one device of a libsurvive recording. The kind comes from the file name unless
-given. Outputs: ``angles.csv`` and, when a station's OOTX frame decoded, ``ootx.toml``.
+given. Outputs: ``angles.csv``, ``ootx.toml`` when a station's OOTX frame decoded, and
+``imu.csv`` when the capture holds IMU samples (a version-2 ``.lhcap``).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from lhgraph.choices import FORMATS
 from lhgraph.errors import InputError
 from lhgraph.io.angles import save_angles
 from lhgraph.io.files import check_writable
+from lhgraph.io.imu import save_imu
 from lhgraph.model.board import Board
 from lhgraph.model.calibration import save_calibration
 from lhgraph.signal.capture import read_capture, read_raw_dump
@@ -22,6 +24,7 @@ from lhgraph.signal.libsurvive import read_libsurvive
 
 ANGLES_FILE = "angles.csv"
 OOTX_FILE = "ootx.toml"
+IMU_FILE = "imu.csv"
 RAW_SAMPLE_RATE_HZ = 2_000_000
 """Sample rate of a raw dump unless given (the board's)."""
 
@@ -87,12 +90,17 @@ def check_output_directory(out_dir: str | Path, overwrite: bool = False) -> None
 
 def write_decoded(result: DecodeResult, out_dir: str | Path, overwrite: bool = False
                   ) -> list[Path]:
-    """Write ``angles.csv`` and (when any station's OOTX decoded) ``ootx.toml``."""
+    """Write ``angles.csv``, ``ootx.toml`` (when any station's OOTX decoded) and ``imu.csv``
+    (when the recording has IMU samples); nothing is written unless all of them may be."""
     out_dir = Path(out_dir)
-    targets = [out_dir / ANGLES_FILE] + ([out_dir / OOTX_FILE] if result.calibrations else [])
+    ootx, imu = out_dir / OOTX_FILE, out_dir / IMU_FILE
+    targets = ([out_dir / ANGLES_FILE] + ([ootx] if result.calibrations else [])
+               + ([imu] if result.imu is not None else []))
     for target in targets:
         check_writable(target, overwrite)
     written = [save_angles(result.angles, targets[0], overwrite)]
     if result.calibrations:
-        written.append(save_calibration(result.calibrations, targets[1], overwrite))
+        written.append(save_calibration(result.calibrations, ootx, overwrite))
+    if result.imu is not None:
+        written.append(save_imu(result.imu, imu, overwrite, time_format="{:.7f}"))
     return written

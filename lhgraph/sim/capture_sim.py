@@ -5,8 +5,10 @@ sample per slot, who sweeps which axis) and the laser sweep pulses. This adds wh
 photodiodes also see: every station's sync flash in every slot, on every sensor facing that
 station, with its width encoding ``skip``, ``data`` (the station's OOTX bit stream: CRC-valid
 LH1 frames of its factory calibration, back to back) and ``axis`` (SPEC §3); optionally
-carrier chatter, echo pulses, missed flashes and a station vanishing. Times in samples of
-the board clock.
+carrier chatter, echo pulses, missed flashes and a station vanishing. A capture simulated
+with an IMU also gets its samples as the board's ICM-42688-P records them (a version-2
+capture: counts at +-2000 deg/s and +-16 g, stamped with the board sample at or after each
+sample's time). Times in samples of the board clock.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from lhgraph.estimation.gravity import accel_dir_from_up
 from lhgraph.geometry.transforms import inverse, transform_points
 from lhgraph.model.calibration import StationCalibration
 from lhgraph.signal.capture import Capture, pulses_to_edges, write_capture
+from lhgraph.signal.capture_imu import CaptureImu
 from lhgraph.signal.ootx import OotxPayload, encode_frame, pack_payload
 from lhgraph.signal.pulses import LightPulses
 from lhgraph.signal.sync import SYNC_BASE_S, SYNC_STEP_S
@@ -137,6 +140,12 @@ def synthesize_capture(sim: SimulatedCapture,
     channel_map[:S] = board.ids
     capture = pulses_to_edges(pulses, sim.n_samples, channel_map, int(round(fs)))
     capture.board_id, capture.firmware_version = opt.board_id, opt.firmware_version
+    if sim.imu is not None:
+        imu = CaptureImu.from_stream(sim.imu.stream, fs,
+                                     odr_hz=int(round(sim.config.imu.rate_hz)))
+        inside = imu.sample_index < sim.n_samples
+        imu.sample_index, imu.raw = imu.sample_index[inside], imu.raw[inside]
+        capture.imu = imu
     return capture
 
 
