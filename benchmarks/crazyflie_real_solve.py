@@ -19,10 +19,11 @@ and (a) (LH1 log) and issue #15's (LH2 log, ``--log lh2``).
    planes of a turn share a state, docs/crazyflie.md).
 3. ``lhgraph track`` of the log through cfclient's geometry and through ours (hit times),
    each without and with the deck's IMU (``--imu imu.csv``), and through ours calibrated
-   with the IMU, with it; two at a time in parallel processes (wall time of each).
-4. ``benchmarks/crazyflie_evaluation.py``: (b) for cfclient's geometry and both of ours, (a)
-   for the four tracks; the ratio of medians ours (hit times) / cfclient's for (b), for (a)
-   without the IMU and for (a) with it on both sides (issue #14's target: <= 0.6).
+   with the IMU, without and with it; two at a time in parallel processes (wall time of
+   each).
+4. ``benchmarks/crazyflie_evaluation.py``: (b) for cfclient's geometry and ours, (a) for the
+   six tracks; the ratio of medians ours / cfclient's for (b), for (a) without the IMU and
+   for (a) with it on both sides (issue #14's target: <= 0.6).
 Skips (exit 0, one line) without the shared data.
 """
 
@@ -131,6 +132,7 @@ def main() -> int:
               "ours (hit times)": (work / "stations-hit-times.toml", []),
               "cfclient + IMU": (imp / "stations-cfclient.toml", imu),
               "ours (hit times) + IMU": (work / "stations-hit-times.toml", imu),
+              "ours (hit times, IMU)": (work / "stations-hit-times-IMU.toml", []),
               "ours (hit times, IMU) + IMU": (work / "stations-hit-times-IMU.toml", imu)}
     track_s = run_tracks(tracks, imp, work)
     evaluation = work / "evaluation.md"
@@ -156,6 +158,8 @@ def main() -> int:
                   ("a", ", both tracks with the IMU", "ours (hit times) + IMU",
                    "cfclient + IMU"),
                   ("b", ", ours calibrated with the IMU", "ours (hit times, IMU)", "cfclient"),
+                  ("a", ", ours calibrated with the IMU, both tracks without it",
+                   "ours (hit times, IMU)", "cfclient"),
                   ("a", ", ours calibrated with the IMU, both tracks with it",
                    "ours (hit times, IMU) + IMU", "cfclient + IMU"))]
     track_rows = [f"- `lhgraph track` through {name}'s geometry: {s:.0f} s (two tracks in "

@@ -449,3 +449,24 @@ def test_board_capture_carries_the_imu_to_the_solve(tmp_path):
     result = solve_graph(sim.board, load_angles(dec_dir / "angles.csv"), models, imu=decoded)
     error = station_errors(sim.truth, result.stations)[0]
     assert error.position_norm_m < 5e-3 and np.degrees(error.rotation_rad) < 0.3
+
+
+def test_reading_noise_and_the_accelerometer_factor_sigma():
+    # the difference-based estimate finds a white noise under a smooth hand-held signal;
+    # the options take 4x it for the accelerometer factors, within [floor, ceiling]
+    from lhgraph.estimation.graph.options import GraphOptions
+    from lhgraph.estimation.inertial import ACCEL_FACTOR_NOISE_RATIO, reading_noise
+
+    rng = np.random.default_rng(4)
+    t = np.arange(0, 60, 0.01)
+    smooth = np.stack([3 * np.sin(2 * np.pi * f * t + f) for f in (0.7, 1.3, 2.1)], axis=1)
+    sigma = np.array([0.02, 0.05, 0.1])
+    noisy = smooth + rng.normal(0, 1, smooth.shape) * sigma
+    assert np.allclose(reading_noise(noisy), sigma, rtol=0.1)
+    stream = ImuStream(t, noisy, np.zeros_like(noisy))
+    adapted = GraphOptions().for_imu(stream)
+    assert adapted.accel_sigma_mps2 == pytest.approx(ACCEL_FACTOR_NOISE_RATIO * 0.1, rel=0.1)
+    assert GraphOptions(adapt_accel_sigma=False).for_imu(stream).accel_sigma_mps2 == 0.5
+    assert GraphOptions(accel_sigma_mps2=0.1).for_imu(stream).accel_sigma_mps2 == 0.1
+    slow = np.sin(2 * np.pi * 0.5 * t)[:, None] * np.ones(3)  # no noise: the floor
+    assert GraphOptions().for_imu(ImuStream(t, slow, slow)).accel_sigma_mps2 == 0.02

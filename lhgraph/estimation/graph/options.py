@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+
+import numpy as np
 
 from lhgraph.config import check_fields, option
+from lhgraph.estimation.inertial import accel_factor_sigma
+from lhgraph.io.imu import ImuStream
 
 LOSSES = ("cauchy", "huber")
 SOLVERS = ("lm", "isam2")
@@ -64,7 +68,10 @@ class GraphOptions:
     factors (a gyro reading at a state's time; an accelerometer reading over a step, which
     also carries the vibration and the lever arm the model leaves out), used when an IMU
     stream is given (:mod:`lhgraph.estimation.inertial`), whose samples count within
-    ``imu_max_gap_s`` of a state; ``gyro_preintegration``: also a factor per step on the
+    ``imu_max_gap_s`` of a state; ``adapt_accel_sigma``: the accelerometer factors' noise
+    is instead :func:`~lhgraph.estimation.inertial.accel_factor_sigma` of the stream (its
+    readings' own noise, vibration included), between ``min_accel_sigma_mps2`` and
+    ``accel_sigma_mps2`` (the ceiling); ``gyro_preintegration``: also a factor per step on the
     rotation the gyro's readings between the two states integrate to
     (:mod:`lhgraph.estimation.graph.imu_terms`; off by default: on the real Crazyflie log the
     deck's hit times and IMU stamps disagree by milliseconds at turns of ~1 rad/s, far above
@@ -120,6 +127,8 @@ class GraphOptions:
     max_board_step_m: float = option(0.1, gt=0)
     gyro_sigma_rad_s: float = option(0.02, gt=0)
     accel_sigma_mps2: float = option(0.5, gt=0)
+    adapt_accel_sigma: bool = option(True)
+    min_accel_sigma_mps2: float = option(0.02, gt=0)
     imu_max_gap_s: float = option(0.05, gt=0)
     gyro_preintegration: bool = option(False)
     gyro_scale_sigma: float = option(0.0, ge=0)
@@ -131,3 +140,13 @@ class GraphOptions:
 
     def __post_init__(self) -> None:
         check_fields(self)
+
+    def for_imu(self, imu: ImuStream) -> GraphOptions:
+        """These options with the accelerometer noise of ``imu`` when ``adapt_accel_sigma``
+        (:func:`~lhgraph.estimation.inertial.accel_factor_sigma`, clipped to
+        [``min_accel_sigma_mps2``, ``accel_sigma_mps2``]; the ceiling wins)."""
+        if not self.adapt_accel_sigma:
+            return self
+        sigma = float(np.clip(accel_factor_sigma(imu), self.min_accel_sigma_mps2,
+                              self.accel_sigma_mps2))
+        return replace(self, accel_sigma_mps2=sigma)

@@ -104,6 +104,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     fit, ev, cov = _optimise(problem, options, init, progress)
     notes = []
     if imu is not None:
+        options = options.for_imu(imu)
         inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
         refined = Initialisation(ev.station_poses().copy(), ev.board_poses().copy(),
                                  ev.board_twists().copy())
