@@ -274,7 +274,16 @@ def test_version_2_capture_with_imu_records_byte_identical(virtual_board: Path,
     assert (st.imu_part, st.imu_records, st.imu_missed) == (1, 200, 3)
     assert result.n_records == 3000 and result.n_imu_records == 200 and result.imu_missed == 3
     assert "3000 edge records, 200 IMU samples" in result.summary()
-    assert "3 IMU samples missed" in result.summary()
+    assert "3 IMU samples missed" in result.summary() and "no IMU" not in result.summary()
+    # a board whose IMU did not answer: a version-2 file without IMU records, said so
+    none = tmp_path / "none.lhcap"
+    none.write_bytes(encode_capture(Capture(index, words, 400_001,
+                                            imu=CaptureImu([], [], part=0, odr_hz=0))))
+    with board(virtual_board, none) as port:
+        result = fetch(port, tmp_path / "none-out.lhcap")
+    assert (tmp_path / "none-out.lhcap").read_bytes() == none.read_bytes()
+    assert result.n_imu_records == 0 and result.imu_part == 0
+    assert "no IMU answered on the board" in result.summary()
 
 
 def test_cli_byte_identical(virtual_board: Path, capture: tuple[Path, bytes],

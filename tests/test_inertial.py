@@ -470,3 +470,21 @@ def test_reading_noise_and_the_accelerometer_factor_sigma():
     assert GraphOptions(accel_sigma_mps2=0.1).for_imu(stream).accel_sigma_mps2 == 0.1
     slow = np.sin(2 * np.pi * 0.5 * t)[:, None] * np.ones(3)  # no noise: the floor
     assert GraphOptions().for_imu(ImuStream(t, slow, slow)).accel_sigma_mps2 == 0.02
+
+
+def test_long_steps_loosen_their_accelerometer_factor():
+    # each step's noise adds, in quadrature, how far the middle reading is from the mean of
+    # the readings in the step: a steady or linearly changing force keeps the base noise
+    # (the middle reading is the mean), a force that turns within a long step loosens it
+    t = np.arange(0.0, 1.2, 0.01)
+    accel = np.zeros((len(t), 3))
+    accel[:, 1] = t  # a ramp: the middle reading is the mean
+    accel[60:, 0] = np.where(t[60:] < 0.9, 0.0, 3.0)  # a step of 3 m/s^2 at 0.9 s
+    stream = ImuStream(t, accel, np.zeros_like(accel))
+    states = np.array([0.0, 0.005, 0.3, 0.6, 1.0])
+    data = inertial_data(stream, states, max_gap_s=0.5)
+    assert data.force_spread[0] == 0.0  # one reading
+    assert np.allclose(data.force_spread[1:3], 0.0, atol=5e-3)  # the ramp (to a sample)
+    # 0.6-1.0 s: middle 0.8 s reads 0, the mean of x is 3 * 10/40: rms over 3 axes
+    assert data.force_spread[3] == pytest.approx(0.75 / np.sqrt(3), rel=1e-3)
+    assert np.allclose(data.accel_sigmas(0.1), np.sqrt(0.01 + data.force_spread**2))

@@ -36,7 +36,7 @@ from lhgraph.device.protocol import (
 )
 from lhgraph.errors import DeviceError, InputError
 from lhgraph.io.files import check_writable, write_atomic
-from lhgraph.signal.capture import HEADER_LEN, file_layout
+from lhgraph.signal.capture import HEADER_LEN, VERSION_IMU, file_layout
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,8 @@ class CaptureDownload:
     board_problems: tuple[str, ...] = ()
     n_imu_records: int = 0
     imu_missed: int = 0
+    imu_part: int | None = None
+    """The IMU part of a version-2 capture (0: none answered at boot); None: version 1."""
 
     @property
     def duration_s(self) -> float:
@@ -72,6 +74,8 @@ class CaptureDownload:
         extra = "; OVERFLOWED (capture stopped early)" if self.overflowed else ""
         if self.imu_missed:
             extra += f"; {self.imu_missed} IMU samples missed"
+        if self.imu_part == 0:
+            extra += "; no IMU answered on the board (light only)"
         imu = f", {self.n_imu_records} IMU samples" if self.n_imu_records else ""
         if self.board_problems:
             extra += "; BOARD: " + "; ".join(self.board_problems)
@@ -178,11 +182,12 @@ def download_capture(port: str, output_path: str | os.PathLike[str], duration_s:
     flags, board_id, fw = struct.unpack_from("<III", data, 12)
     (sample_rate,) = struct.unpack_from("<I", data, 8)
     (samples,) = struct.unpack_from("<Q", data, 32)
-    _, n_records, n_imu, _ = file_layout(data) or (0, 0, 0, 0)
-    imu_missed = struct.unpack_from("<I", data, HEADER_LEN + 4)[0] if n_imu else 0
+    version, n_records, n_imu, _ = file_layout(data) or (0, 0, 0, 0)
+    imu_missed, imu_part = (struct.unpack_from("<IH", data, HEADER_LEN + 4)
+                            if version == VERSION_IMU else (0, None))
     return CaptureDownload(
         path=output, size_bytes=len(data), n_records=n_records, n_imu_records=n_imu,
-        imu_missed=imu_missed, capture_samples=samples,
+        imu_missed=imu_missed, imu_part=imu_part, capture_samples=samples,
         sample_rate_hz=sample_rate, board_id=board_id, firmware_version=fw,
         overflowed=bool(flags & 1), crc32=status.image_crc, blocks=status.block_count,
         blocks_rerequested=rerequested, reconnects=link.reconnects, capture_s=capture_s,

@@ -8,7 +8,10 @@ determined tilt and range; its IMU, on the same clock, measures what the light d
 - **accelerometer**: over every step k -> k + 1, the change of the world-frame velocity
   ``R v`` divided by the step equals the specific force, rotated into the world, plus
   gravity. The specific force over the step is the accelerometer's reading at the step's
-  middle, rotated into state k's frame by half a step of the gyro's rate.
+  middle, rotated into state k's frame by half a step of the gyro's rate; the factor's
+  noise adds how far that reading is from the mean of the readings within the step
+  (:meth:`InertialData.accel_sigmas`) to the options' (:func:`accel_factor_sigma` by
+  default).
 
 Residuals and Jacobians: :func:`lhgraph.estimation.residuals.gyro_residuals` and
 :func:`~lhgraph.estimation.residuals.accel_residuals`. The IMU is taken at the board origin
@@ -76,9 +79,12 @@ class InertialData:
     """The IMU readings at a problem's K board states: ``rate`` (K, 3) the gyro at each
     state's time (rad/s, board frame), ``rate_ok`` (K,) where it has samples within the gap;
     ``force`` (K - 1, 3) the specific force over each step in its first state's frame
-    (m/s^2), ``force_ok`` (K - 1,) likewise; ``dt`` (K - 1,) the steps (s). ``stream``,
-    ``state_time`` and ``half_turn`` (K - 1, 3, 3: each step's middle frame seen from its
-    first state's) let :meth:`read_at` sample the stream again at a time offset."""
+    (m/s^2), ``force_ok`` (K - 1,) likewise; ``dt`` (K - 1,) the steps (s); ``force_spread``
+    (K - 1,) how far the one reading the factor uses (at the step's middle) is from the mean
+    of the accelerometer's readings within the step (m/s^2, rms over the axes; 0 with fewer
+    than two readings): its error as the step's mean force. ``stream``, ``state_time`` and
+    ``half_turn`` (K - 1, 3, 3: each step's middle frame seen from its first state's) let
+    :meth:`read_at` sample the stream again at a time offset."""
 
     rate: Array
     rate_ok: NDArray[np.bool_]
@@ -88,6 +94,14 @@ class InertialData:
     stream: ImuStream | None = None
     state_time: Array | None = None
     half_turn: Array | None = None
+    force_spread: Array | None = None
+
+    def accel_sigmas(self, sigma_mps2: float) -> Array:
+        """Each step's accelerometer-factor noise (K - 1,): ``sigma_mps2`` and the step's
+        middle-reading error (``force_spread``) added in quadrature, so a long step (a turn
+        no station sees) is not held to one reading."""
+        spread = np.zeros(len(self.dt)) if self.force_spread is None else self.force_spread
+        return np.sqrt(sigma_mps2**2 + spread**2)
 
     def read_at(self, offset_s: float) -> tuple[Array, Array, Array, Array]:
         """The gyro at every state and the specific force over every step with the IMU read
@@ -146,7 +160,20 @@ def inertial_data(imu: ImuStream, state_time: Array, max_gap_s: float = 0.05,
                          f"(IMU {t[0]:.3f}-{t[-1]:.3f} s, light {state_time[0]:.3f}-"
                          f"{state_time[-1]:.3f} s): not on the light's clock?", source)
     return InertialData(rate, rate_ok, force, force_ok & (dt > 0), dt, imu,
-                        np.asarray(state_time, dtype=float), half_turn)
+                        np.asarray(state_time, dtype=float), half_turn,
+                        _mid_reading_error(t, imu.accel_mps2, np.asarray(state_time, dtype=float),
+                                           force_mid))
+
+
+def _mid_reading_error(t: Array, x: Array, edges: Array, mid: Array) -> Array:
+    """Per interval ``[edges[k], edges[k+1])``: how far ``mid[k]`` (the samples ``x`` at times
+    ``t`` interpolated at the interval's middle) is from the mean of the samples in it, rms
+    over the columns (0 with fewer than two samples)."""
+    bounds = np.searchsorted(t, edges)
+    n = np.diff(bounds)
+    csum = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+    mean = (csum[bounds[1:]] - csum[bounds[:-1]]) / np.maximum(n, 1)[:, None]
+    return np.where(n >= 2, np.sqrt(np.mean((mid - mean) ** 2, axis=1)), 0.0)
 
 
 def initial_gravity(data: InertialData, T_world_board: Array) -> Array:

@@ -57,7 +57,8 @@ class ImuTerms:
     def __init__(self, data: InertialData, layout: VariableLayout, options: GraphOptions):
         self.data = data
         self.gyro_sigma = options.gyro_sigma_rad_s
-        self.accel_sigma = options.accel_sigma_mps2
+        self.accel_sigmas = data.accel_sigmas(options.accel_sigma_mps2)
+        """Each step's accelerometer-factor noise (m/s^2, :meth:`InertialData.accel_sigmas`)."""
         self.calibration = layout.family(IMU_CALIBRATION.name)
         self.calibration_sigmas = np.array(
             [options.gyro_scale_sigma or FIXED_CALIBRATION_SIGMA] * 3
@@ -189,7 +190,7 @@ class ImuTerms:
         prior residuals (what the IMU factors add to ``graph.error``)."""
         d = self.data
         g = self.g[d.rate_ok] / self.gyro_sigma
-        a = self.a[d.force_ok] / self.accel_sigma
+        a = self.a[d.force_ok] / self.accel_sigmas[d.force_ok, None]
         m = (np.linalg.norm(self.imu[6:]) - STANDARD_GRAVITY_MPS2) / GRAVITY_SIGMA_MPS2
         c = self.C / self.calibration_sigmas if self.calibration is not None else np.zeros(0)
         p = (self.p / self.preintegration_sigmas[:, None] if len(self.preintegrated)
