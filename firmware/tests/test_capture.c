@@ -184,17 +184,25 @@ int main(void)
         }
     }
     CHECK_EQ(kept, 7);
+    CHECK_EQ(c.imu.n, 7);
     CHECK_EQ(lhb_capture_add_imu(&c, NS, raw), -LHB_E_STATE); /* past the last sample */
     CHECK(lhb_capture_feed(&c, samples + NS - 500u, 500u));
-    CHECK_EQ(lhb_capture_add_imu(&c, NS - 1u, raw), -LHB_E_STATE); /* done */
+    /* done, not yet finalising: a late data-ready interrupt's sample is still kept */
+    for (int a = 0; a < 6; a++) {
+        raw[a] = (int16_t)(a - 3);
+    }
+    CHECK_EQ(lhb_capture_add_imu(&c, NS - 1u, raw), LHB_OK);
+    kept++;
     run_poll_until_ready(&c, 1);
     CHECK_EQ(c.state, LHB_STATE_READY);
+    CHECK_EQ(c.imu.n, 8);
+    CHECK_EQ(lhb_capture_add_imu(&c, NS - 1u, raw), -LHB_E_STATE); /* ready: ignored */
     size_t n1 = reference_image(&t, samples, NS, v1);
     uint32_t edges = lhb_get_le32(v1 + 40);
     memcpy(want, v1, 108);
     lhb_put_le16(want + 4, 2);
     lhb_put_le16(want + 6, 128);
-    lhb_put_le32(want + 108, 7);   /* IMU records */
+    lhb_put_le32(want + 108, 8);   /* IMU records */
     lhb_put_le32(want + 112, 2);   /* missed: the late one and the driver's */
     lhb_put_le16(want + 116, 1);
     lhb_put_le16(want + 118, 1000);
@@ -214,9 +222,14 @@ int main(void)
         }
         pos += 16;
     }
+    lhb_put_le32(want + pos, NS - 1u); /* the late one */
+    for (int a = 0; a < 6; a++) {
+        lhb_put_le16(want + pos + 4 + 2 * a, (uint16_t)(int16_t)(a - 3));
+    }
+    pos += 16;
     lhb_put_le32(want + pos, lhb_crc32(want, pos));
     n = pos + 4;
-    CHECK_EQ(n, n1 + 20 + 16 * 7);
+    CHECK_EQ(n, n1 + 20 + 16 * 8);
     CHECK_EQ(c.image_size, n);
     CHECK_EQ(lhb_capture_read(&c, 0, got, (uint32_t)n), LHB_OK);
     CHECK(memcmp(got, want, n) == 0);

@@ -171,6 +171,12 @@ int main(void)
     CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
     hb[116] = 0; /* no IMU but IMU records */
     CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
+    hb[116] = 1;
+    hb[124] = 1; /* reserved word not 0 */
+    CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
+    hb[124] = 0;
+    hb[120] = 0; hb[121] = 0; /* IMU records with a zero gyro full scale */
+    CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
     hb[6] = 108; /* version 2 with a version-1 header length */
     CHECK_EQ(lhcap_header_unpack(hb, sizeof hb, &h2), -LHB_E_ARG);
 

@@ -16,6 +16,8 @@ typedef struct {
     int fail_xfer;          /* fail the transfer with this number (1 = first), 0 = never */
     int xfers;
     uint8_t who_am_i;
+    int no_reset_done;      /* the reset never reports RESET_DONE */
+    int pwr_stuck;          /* PWR_MGMT0 writes are lost */
 } fake_icm_t;
 
 static void fake_reset(fake_icm_t *f)
@@ -24,7 +26,7 @@ static void fake_reset(fake_icm_t *f)
     for (unsigned a = ICM42688_ACCEL_DATA_X1; a <= ICM42688_ACCEL_DATA_X1 + 11u; a += 2u) {
         f->reg[a] = 0x80u; /* sensors off: -32768 */
     }
-    f->reg[ICM42688_INT_STATUS] = 0x10u; /* RESET_DONE */
+    f->reg[ICM42688_INT_STATUS] = f->no_reset_done ? 0u : 0x10u; /* RESET_DONE */
     f->reg[ICM42688_GYRO_CONFIG0] = 0x06u;
     f->reg[ICM42688_ACCEL_CONFIG0] = 0x06u;
     f->reg[ICM42688_INT_CONFIG1] = 0x10u;
@@ -63,8 +65,9 @@ static int fake_xfer(void *ctx, const uint8_t *tx, uint8_t *rx, size_t n)
             f->reset_at_us = f->now_us;
             continue;
         }
-        if (a == ICM42688_WHO_AM_I || a == ICM42688_INT_STATUS) {
-            continue; /* read-only */
+        if (a == ICM42688_WHO_AM_I || a == ICM42688_INT_STATUS ||
+            (a == ICM42688_PWR_MGMT0 && f->pwr_stuck)) {
+            continue; /* read-only, or a write the part loses */
         }
         f->reg[a] = tx[i];
         if (a == ICM42688_PWR_MGMT0) {
@@ -173,5 +176,25 @@ int main(void)
     f.fail_xfer = 12; /* 11 transfers in all: a 12th never comes */
     CHECK_EQ(lhb_icm42688_init(&d, &spi, 200), LHB_OK);
     CHECK_EQ(f.reg[ICM42688_GYRO_CONFIG0], 0x07);
+    CHECK_EQ(f.reg[0x64], 0x00); /* 100 us pulses below 4 kHz */
+    /* from 4 kHz the datasheet needs 8 us pulses without de-assert time (INT_CONFIG1) */
+    fake_init(&f);
+    CHECK_EQ(lhb_icm42688_init(&d, &spi, 8000), LHB_OK);
+    CHECK_EQ(f.reg[0x64], 0x60);
+    CHECK_EQ(f.reg[0x4F], 0x03);
+    /* a part that never reports RESET_DONE, and one whose configuration does not stick */
+    fake_init(&f);
+    f.no_reset_done = 1;
+    CHECK_EQ(lhb_icm42688_init(&d, &spi, 1000), -LHB_E_HW);
+    fake_init(&f);
+    f.pwr_stuck = 1;
+    CHECK_EQ(lhb_icm42688_init(&d, &spi, 1000), -LHB_E_HW);
+    CHECK_EQ(d.odr_hz, 0);
+    /* accelerometer data flagged not valid (all -32768) is refused too */
+    fake_init(&f);
+    CHECK_EQ(lhb_icm42688_init(&d, &spi, 1000), LHB_OK);
+    const int16_t acc_off[6] = {-32768, -32768, -32768, 1, 2, 3};
+    set_sample(&f, acc_off);
+    CHECK_EQ(lhb_icm42688_read(&d, raw), -LHB_E_STATE);
     return check_result("imu");
 }

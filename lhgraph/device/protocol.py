@@ -56,6 +56,7 @@ SELF_TEST_PROBLEMS = {
     0x080: "a clock-tree wait timed out",
     0x200: "SDRAM controller timed out",
     0x400: "a DMA stream or the watchdog timed out",
+    0x800: "the IMU's time-stamp counter missed samples (its stamps are wrong)",
 }
 """STATUS self-test bits (byte 40) that mean something went wrong; 0x100 = not run."""
 TRANSIENT_ERRORS = frozenset({E_CRC, E_FRAMING, E_TOO_LONG})

@@ -107,7 +107,9 @@ bool lhb_capture_feed(lhb_capture_t *c, const uint32_t *samples, size_t n)
 
 int lhb_capture_add_imu(lhb_capture_t *c, uint32_t sample_index, const int16_t raw[6])
 {
-    if (c->state != LHB_STATE_CAPTURING || c->done != 0u) {
+    /* also once the samples are all taken (done), until finalising begins: a data-ready
+     * near the end may be served after the DMA interrupt that completed the capture */
+    if (c->state != LHB_STATE_CAPTURING || c->finalising) {
         return -LHB_E_STATE;
     }
     if (sample_index >= c->target) {
@@ -118,7 +120,7 @@ int lhb_capture_add_imu(lhb_capture_t *c, uint32_t sample_index, const int16_t r
 
 void lhb_capture_imu_missed(lhb_capture_t *c)
 {
-    if (c->state == LHB_STATE_CAPTURING && c->done == 0u) {
+    if (c->state == LHB_STATE_CAPTURING && !c->finalising) {
         lhb_imu_log_miss(&c->imu);
     }
 }

@@ -68,9 +68,11 @@ int lhb_icm42688_init(lhb_icm42688_t *d, const lhb_spi_t *spi, uint16_t odr_hz)
     const uint8_t gyro = (uint8_t)((0u << 5) | odr);  /* +-2000 dps */
     const uint8_t accel = (uint8_t)((0u << 5) | odr); /* +-16 g */
     const uint8_t pwr = 0x0Fu;                        /* gyro and accel low-noise */
+    /* 100 us pulses and de-assert time below 4 kHz; 8 us and none from 4 kHz (datasheet) */
+    const uint8_t int1 = odr_hz >= ICM42688_FAST_ODR_HZ ? 0x60u : 0x00u;
     if (read_reg(spi, ICM42688_INT_STATUS, &status) != LHB_OK || (status & 0x10u) == 0u ||
         write_reg(spi, ICM42688_INT_CONFIG, 0x03u) != LHB_OK ||
-        write_reg(spi, ICM42688_INT_CONFIG1, 0x00u) != LHB_OK ||
+        write_reg(spi, ICM42688_INT_CONFIG1, int1) != LHB_OK ||
         write_reg(spi, ICM42688_INT_SOURCE0, 0x08u) != LHB_OK ||
         write_reg(spi, ICM42688_GYRO_CONFIG0, gyro) != LHB_OK ||
         write_reg(spi, ICM42688_ACCEL_CONFIG0, accel) != LHB_OK ||

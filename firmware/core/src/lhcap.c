@@ -74,7 +74,9 @@ int lhcap_header_unpack(const uint8_t *buf, size_t len, lhcap_header_t *h)
         h->imu_odr_hz = lhb_get_le16(buf + 118);
         h->imu_gyro_fs_dps = lhb_get_le16(buf + 120);
         h->imu_accel_fs_g = lhb_get_le16(buf + 122);
-        if (h->imu_part > LHCAP_IMU_ICM42688P || (h->imu_part == LHCAP_IMU_NONE && h->n_imu != 0u)) {
+        if (h->imu_part > LHCAP_IMU_ICM42688P || (h->imu_part == LHCAP_IMU_NONE && h->n_imu != 0u) ||
+            (h->n_imu != 0u && (h->imu_gyro_fs_dps == 0u || h->imu_accel_fs_g == 0u)) ||
+            lhb_get_le32(buf + 124) != 0u) {
             return -LHB_E_ARG;
         }
     }

@@ -77,7 +77,8 @@ void lhb_capture_abort(lhb_capture_t *c);
 /* Feeds consecutive port words; returns true once no more samples are wanted. */
 bool lhb_capture_feed(lhb_capture_t *c, const uint32_t *samples, size_t n);
 /* One IMU sample (raw = ax ay az gx gy gz counts) whose data-ready came at `sample_index`;
- * kept while capturing and before the capture's last sample. Returns LHB_OK, -LHB_E_STATE
+ * kept while capturing (also after the last sample was taken, until finalising) and when
+ * before the capture's end (records past the samples taken are dropped at finalising). Returns LHB_OK, -LHB_E_STATE
  * (not capturing: ignored) or -LHB_E_RANGE (not recorded: counted as missed). */
 int lhb_capture_add_imu(lhb_capture_t *c, uint32_t sample_index, const int16_t raw[6]);
 /* The IMU driver lost a sample while capturing (counted in the header's imu_missed). */

@@ -18,6 +18,7 @@
 #define LHB_ST_NOT_RUN 0x100u         /* no hardware self-test (virtual board) */
 #define LHB_ST_SDRAM_TIMEOUT 0x200u   /* the FMC stayed busy: SDRAM not initialised */
 #define LHB_ST_PERIPH_TIMEOUT 0x400u  /* a DMA stream or the watchdog did not answer in time */
+#define LHB_ST_IMU_CLOCK 0x800u       /* the IMU stamps' counter missed sampler updates */
 
 typedef struct {
     uint32_t selftest;          /* LHB_ST_* bits */

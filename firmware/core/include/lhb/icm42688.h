@@ -21,7 +21,9 @@
 #define ICM42688_PWR_MGMT0 0x4Eu      /* bits 3:2 gyro mode, 1:0 accel mode (3 = low noise) */
 #define ICM42688_GYRO_CONFIG0 0x4Fu   /* bits 7:5 full scale (0 = 2000 dps), 3:0 ODR */
 #define ICM42688_ACCEL_CONFIG0 0x50u  /* bits 7:5 full scale (0 = 16 g), 3:0 ODR */
-#define ICM42688_INT_CONFIG1 0x64u    /* bit 4 INT_ASYNC_RESET: must be cleared */
+#define ICM42688_INT_CONFIG1 0x64u    /* bit 6 8 us pulse, bit 5 no de-assert time (both needed
+                                       * at >= 4 kHz), bit 4 INT_ASYNC_RESET: must be cleared */
+#define ICM42688_FAST_ODR_HZ 4000u    /* from this rate the short pulse is required */
 #define ICM42688_INT_SOURCE0 0x65u    /* bit 3 UI_DRDY_INT1_EN */
 #define ICM42688_WHO_AM_I 0x75u
 #define ICM42688_REG_BANK_SEL 0x76u

@@ -44,7 +44,8 @@ uint32_t lhcap_header_len(uint16_t version);
 /* Packs h->version's header (lhcap_header_len bytes; version 1 unless h->version is 2). */
 void lhcap_header_pack(const lhcap_header_t *h, uint8_t out[LHCAP_HEADER_LEN_IMU]);
 /* Strict: magic, version 1 with header length exactly 108 or version 2 with exactly 128
- * (what this firmware writes), no unknown flag bits, channel ids >= -1, no unknown IMU part.
+ * (what this firmware writes), no unknown flag bits, channel ids >= -1, no unknown IMU part,
+ * no IMU records with a zero full scale, the reserved word 0.
  * Returns LHB_OK or -LHB_E_ARG. */
 int lhcap_header_unpack(const uint8_t *buf, size_t len, lhcap_header_t *h);
 
