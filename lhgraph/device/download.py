@@ -36,7 +36,7 @@ from lhgraph.device.protocol import (
 )
 from lhgraph.errors import DeviceError, InputError
 from lhgraph.io.files import check_writable, write_atomic
-from lhgraph.signal.capture import HEADER_LEN, VERSION_IMU, file_layout
+from lhgraph.signal.capture import HEADER_LEN, VERSION_IMU, file_layout, imu_header
 
 
 @dataclass(frozen=True)
@@ -183,11 +183,11 @@ def download_capture(port: str, output_path: str | os.PathLike[str], duration_s:
     (sample_rate,) = struct.unpack_from("<I", data, 8)
     (samples,) = struct.unpack_from("<Q", data, 32)
     version, n_records, n_imu, _ = file_layout(data) or (0, 0, 0, 0)
-    imu_missed, imu_part = (struct.unpack_from("<IH", data, HEADER_LEN + 4)
-                            if version == VERSION_IMU else (0, None))
+    _, imu_missed, imu_part, *_ = imu_header(data)
     return CaptureDownload(
         path=output, size_bytes=len(data), n_records=n_records, n_imu_records=n_imu,
-        imu_missed=imu_missed, imu_part=imu_part, capture_samples=samples,
+        imu_missed=imu_missed, imu_part=imu_part if version == VERSION_IMU else None,
+        capture_samples=samples,
         sample_rate_hz=sample_rate, board_id=board_id, firmware_version=fw,
         overflowed=bool(flags & 1), crc32=status.image_crc, blocks=status.block_count,
         blocks_rerequested=rerequested, reconnects=link.reconnects, capture_s=capture_s,

@@ -117,9 +117,18 @@ def file_layout(data: bytes) -> tuple[int, int, int, int] | None:
     if version == VERSION and header_len >= HEADER_LEN:
         return version, n, 0, header_len + 8 * n + 4
     if version == VERSION_IMU and header_len >= HEADER_LEN_IMU and len(data) >= HEADER_LEN_IMU:
-        (m,) = struct.unpack_from("<I", data, HEADER_LEN)
+        m = imu_header(data)[0]
         return version, n, m, header_len + 8 * n + 16 * m + 4
     return None
+
+
+def imu_header(data: bytes) -> tuple[int, int, int, int, int, int]:
+    """``(IMU records, missed, part, output data rate Hz, gyro full scale deg/s, accelerometer
+    full scale g)`` of the bytes of a version-2 ``.lhcap`` header, zeros for version 1."""
+    version, header_len = struct.unpack_from("<HH", data, 4)
+    if version != VERSION_IMU or header_len < HEADER_LEN_IMU or len(data) < HEADER_LEN_IMU:
+        return (0,) * 6
+    return _HEADER_IMU.unpack_from(data, HEADER_LEN)[:6]
 
 
 def write_capture(capture: Capture, path: str | Path, overwrite: bool = False) -> Path:
@@ -182,8 +191,7 @@ def decode_capture_bytes(data: bytes, source: str | Path | None = None
     channel_map = np.array(fields[10:], dtype=np.int16)
     if rate == 0:
         raise InputError("sample rate is 0", source)
-    m, missed, part, odr, gyro_fs, accel_fs = (
-        _HEADER_IMU.unpack_from(data, HEADER_LEN)[:6] if version == VERSION_IMU else (0,) * 6)
+    m, missed, part, odr, gyro_fs, accel_fs = imu_header(data)
     if part not in IMU_PARTS and (part != 0 or m):
         raise InputError(f"unknown IMU part {part}", source)
     if m and (gyro_fs == 0 or accel_fs == 0):

@@ -168,10 +168,10 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
                 gyro_noise, [BOARD_TWIST.key(k), IMU_BIAS.key(0), IMU_CALIBRATION.key(0)],
                 ev.gyro_error(k)) if calibrated
                 else gyro_factor(k, inertial.rate[k], options.gyro_sigma_rad_s))
-        accel_sigmas = inertial.accel_sigmas(options.accel_sigma_mps2)
         for k in np.flatnonzero(inertial.force_ok).tolist():
-            graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(3, accel_sigmas[k]),
-                                         accel_keys(k, calibrated), ev.accel_error(k)))
+            accel_noise = gtsam.noiseModel.Isotropic.Sigma(3, ev.imu.accel_sigmas[k])
+            graph.add(gtsam.CustomFactor(accel_noise, accel_keys(k, calibrated),
+                                         ev.accel_error(k)))
         for i, (k, sigma) in enumerate(zip(ev.imu.preintegrated.tolist(),
                                            ev.imu.preintegration_sigmas.tolist(),
                                            strict=True)):
