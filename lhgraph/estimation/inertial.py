@@ -147,6 +147,7 @@ def inertial_data(imu: ImuStream, state_time: Array, max_gap_s: float = 0.05,
         raise InputError("the IMU stream has no gyro columns (gx, gy, gz): the graph's IMU "
                          "factors need both the accelerometer and the gyro", source)
     t = imu.time
+    state_time = np.asarray(state_time, dtype=float)
     rate, rate_ok = _interpolated(t, imu.gyro_rad_s, state_time, max_gap_s)
     dt = np.diff(state_time)
     middle = state_time[:-1] + dt / 2
@@ -159,10 +160,8 @@ def inertial_data(imu: ImuStream, state_time: Array, max_gap_s: float = 0.05,
         raise InputError(f"no IMU sample within {max_gap_s * 1e3:.0f} ms of any board state "
                          f"(IMU {t[0]:.3f}-{t[-1]:.3f} s, light {state_time[0]:.3f}-"
                          f"{state_time[-1]:.3f} s): not on the light's clock?", source)
-    return InertialData(rate, rate_ok, force, force_ok & (dt > 0), dt, imu,
-                        np.asarray(state_time, dtype=float), half_turn,
-                        _mid_reading_error(t, imu.accel_mps2, np.asarray(state_time, dtype=float),
-                                           force_mid))
+    return InertialData(rate, rate_ok, force, force_ok & (dt > 0), dt, imu, state_time,
+                        half_turn, _mid_reading_error(t, imu.accel_mps2, state_time, force_mid))
 
 
 def _mid_reading_error(t: Array, x: Array, edges: Array, mid: Array) -> Array:
