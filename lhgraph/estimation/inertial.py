@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
+from lhgraph.estimation.spread import robust_sigma
 from lhgraph.geometry.transforms import so3_exp
 from lhgraph.io.imu import STANDARD_GRAVITY_MPS2, ImuStream
 
@@ -61,8 +62,7 @@ def reading_noise(x: Array) -> Array:
     signal's curvature adds little at an IMU's rate), robustly (MAD): the difference-based
     estimator of the noise of a regression."""
     d2 = x[2:] - 2.0 * x[1:-1] + x[:-2]
-    mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
-    return 1.4826 * mad / np.sqrt(6.0)
+    return robust_sigma(d2, axis=0) / np.sqrt(6.0)
 
 
 def accel_factor_sigma(imu: ImuStream) -> float:

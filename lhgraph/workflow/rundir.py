@@ -28,6 +28,7 @@ import numpy as np
 from lhgraph.errors import InputError
 from lhgraph.estimation.metrics import PoseError, station_errors
 from lhgraph.estimation.result import Residuals, SolveResult
+from lhgraph.estimation.spread import robust_sigma
 from lhgraph.geometry.transforms import euler_zyx, matrix_to_quat
 from lhgraph.io.files import check_writable, write_atomic, write_csv_columns
 from lhgraph.io.stations import Stations, load_stations, save_stations
@@ -115,8 +116,7 @@ def residual_statistics(res: Residuals) -> dict[str, Any]:
                 "inlier_fraction": float(np.mean(w > 0.5)) if len(w) else None,
                 "rms_urad": float(np.sqrt(np.mean(inl**2)) * 1e6) if len(inl) else None,
                 "median_abs_urad": float(np.median(np.abs(r)) * 1e6) if len(r) else None,
-                "robust_sigma_urad": (float(1.4826 * np.median(np.abs(r - np.median(r))) * 1e6)
-                                      if len(r) else None),
+                "robust_sigma_urad": robust_sigma(r) * 1e6 if len(r) else None,
                 "max_abs_urad": float(np.max(np.abs(r)) * 1e6) if len(r) else None}
 
     out = stats(np.ones(len(res.residual_rad), dtype=bool))

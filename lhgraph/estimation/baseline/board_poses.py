@@ -15,6 +15,7 @@ from scipy.optimize import minimize
 from lhgraph.estimation.baseline.cost import angle_cost, rotation, start_simplex
 from lhgraph.estimation.baseline.options import PaperOptions, Progress
 from lhgraph.estimation.reconstruct import Measurements
+from lhgraph.estimation.spread import robust_sigma
 from lhgraph.geometry.transforms import make_pose, so3_exp
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.board import Board
@@ -276,8 +277,7 @@ def outliers(values: ArrayLike, n_mads: float) -> NDArray[np.bool_]:
     v = np.asarray(values, dtype=float)
     if len(v) == 0 or not math.isfinite(n_mads):
         return np.zeros(len(v), dtype=bool)
-    median = float(np.median(v))
-    return v > median + n_mads * 1.4826 * float(np.median(np.abs(v - median)))
+    return v > float(np.median(v)) + n_mads * robust_sigma(v)
 
 
 def reject_outlier_poses(poses: BoardPoses, n_mads: float) -> BoardPoses:

@@ -22,6 +22,7 @@ import numpy as np
 
 from lhgraph.estimation.graph.evaluator import FactorEvaluator
 from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.spread import robust_sigma
 
 Progress = Callable[[str], None]
 
@@ -111,7 +112,7 @@ class NoiseAdaptation:
             ratio = max(ratio, options.min_psd_factor / ev.motion_psd_factor())
         # the diodes' noise from the residuals (robust: MAD), never below the configured
         # sigma (the 2 MHz quantisation) nor above max_sigma_factor times it
-        sigma_hat = 1.4826 * float(np.median(np.abs(ev.bearing_residuals())))
+        sigma_hat = robust_sigma(ev.bearing_residuals(), about_zero=True)
         noise = 1.0
         if options.adapt_angle_sigma:
             noise = float(np.clip(sigma_hat, options.angle_sigma_rad,

@@ -44,6 +44,7 @@ from lhgraph.estimation.init.pnp_kabsch import (
 )
 from lhgraph.estimation.problem import GraphProblem, build_problem
 from lhgraph.estimation.residuals import BearingHits, bearing_residuals
+from lhgraph.estimation.spread import robust_sigma
 from lhgraph.geometry.transforms import se3_exp
 from lhgraph.io.angles import Angles
 from lhgraph.io.imu import ImuStream
@@ -201,7 +202,7 @@ def snapshot_poses(problem: GraphProblem, X: Array, V: Array, T_world_lh: Array,
         return X
     for _ in range(iterations):
         r, H, _, _ = bearing_residuals(hits, X[states], V[states], T_world_lh, problem.models)
-        scale = max(3.0 * 1.4826 * float(np.median(np.abs(r))), 1e-4)
+        scale = max(3.0 * robust_sigma(r, about_zero=True), 1e-4)
         w = 1.0 / (1.0 + (r / scale) ** 2)
         H = H[:, 3:]  # position only: a few diodes leave the rotation barely determined
         A = _sum_by_state(hits.state, w[:, None, None] * H[:, :, None] * H[:, None, :], K)
