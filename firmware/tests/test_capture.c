@@ -18,11 +18,61 @@ static uint8_t got[128 + 8 * NS + 16 * NI + 4];
 static uint8_t v1[108 + 8 * NS + 4];
 static uint32_t imu_storage[LHB_IMU_WORDS * NI];
 
-static void run_poll_until_ready(lhb_capture_t *c, uint32_t now)
+/* Polls until READY (at most 100000 times); returns the polls made. */
+static uint32_t run_poll_until_ready(lhb_capture_t *c, uint32_t now)
 {
-    for (int i = 0; i < 100 && c->state != LHB_STATE_READY; i++) {
+    uint32_t i = 0;
+    for (; i < 100000u && c->state != LHB_STATE_READY; i++) {
         lhb_capture_poll(c, now);
     }
+    return i;
+}
+
+/* The version-2 capture of main(): IMU samples added between feeds (as the data-ready
+ * interrupt does), one late and one after the last feed; the CRC computed `step` records
+ * per poll. Returns the polls it took to be READY. */
+static uint32_t capture_v2(lhb_capture_t *c, const lhb_hw_t *hw, const lhcap_header_t *t2,
+                           uint32_t step)
+{
+    lhb_capture_init(c, hw, storage, 1000, t2);
+    int16_t raw[6] = {0};
+    CHECK_EQ(lhb_capture_add_imu(c, 0, raw), -LHB_E_STATE); /* not capturing: ignored */
+    lhb_capture_set_imu(c, imu_storage, NI);
+    c->fixed_start_time = true;
+    CHECK_EQ(lhb_capture_arm(c, 2, 0, 0, 0), LHB_OK);
+    lhb_capture_poll(c, 0);
+    uint32_t kept = 0;
+    for (uint32_t i = 0; i < NS / 500u; i++) {
+        if (i > 0) {
+            lhb_capture_feed(c, samples + 500u * (i - 1u), 500u);
+        }
+        for (int a = 0; a < 6; a++) {
+            raw[a] = (int16_t)(a % 2 ? -(int)(1000 * i + (uint32_t)a) : (int)(1000 * i) + a);
+        }
+        if (i == 3) {
+            CHECK_EQ(lhb_capture_add_imu(c, 500u * i - 500u, raw), -LHB_E_RANGE); /* late */
+            lhb_capture_imu_missed(c);
+            continue;
+        }
+        if (lhb_capture_add_imu(c, 500u * i + 17u, raw) == LHB_OK) {
+            kept++;
+        }
+    }
+    CHECK_EQ(kept, 7);
+    CHECK_EQ(c->imu.n, 7);
+    CHECK_EQ(lhb_capture_add_imu(c, NS, raw), -LHB_E_STATE); /* past the last sample */
+    CHECK(lhb_capture_feed(c, samples + NS - 500u, 500u));
+    /* done, not yet finalising: a late data-ready interrupt's sample is still kept */
+    for (int a = 0; a < 6; a++) {
+        raw[a] = (int16_t)(a - 3);
+    }
+    CHECK_EQ(lhb_capture_add_imu(c, NS - 1u, raw), LHB_OK);
+    c->finalise_step = step;
+    uint32_t polls = run_poll_until_ready(c, 1);
+    CHECK_EQ(c->state, LHB_STATE_READY);
+    CHECK_EQ(c->imu.n, 8);
+    CHECK_EQ(lhb_capture_add_imu(c, NS - 1u, raw), -LHB_E_STATE); /* ready: ignored */
+    return polls;
 }
 
 int main(void)
@@ -159,44 +209,7 @@ int main(void)
     t2.imu_odr_hz = 1000u;
     t2.imu_gyro_fs_dps = 2000u;
     t2.imu_accel_fs_g = 16u;
-    lhb_capture_init(&c, &hw, storage, 1000, &t2);
-    int16_t raw[6] = {0};
-    CHECK_EQ(lhb_capture_add_imu(&c, 0, raw), -LHB_E_STATE); /* not capturing: ignored */
-    lhb_capture_set_imu(&c, imu_storage, NI);
-    c.fixed_start_time = true;
-    CHECK_EQ(lhb_capture_arm(&c, 2, 0, 0, 0), LHB_OK);
-    lhb_capture_poll(&c, 0);
-    uint32_t kept = 0;
-    for (uint32_t i = 0; i < NS / 500u; i++) {
-        if (i > 0) {
-            lhb_capture_feed(&c, samples + 500u * (i - 1u), 500u);
-        }
-        for (int a = 0; a < 6; a++) {
-            raw[a] = (int16_t)(a % 2 ? -(int)(1000 * i + (uint32_t)a) : (int)(1000 * i) + a);
-        }
-        if (i == 3) {
-            CHECK_EQ(lhb_capture_add_imu(&c, 500u * i - 500u, raw), -LHB_E_RANGE); /* late */
-            lhb_capture_imu_missed(&c);
-            continue;
-        }
-        if (lhb_capture_add_imu(&c, 500u * i + 17u, raw) == LHB_OK) {
-            kept++;
-        }
-    }
-    CHECK_EQ(kept, 7);
-    CHECK_EQ(c.imu.n, 7);
-    CHECK_EQ(lhb_capture_add_imu(&c, NS, raw), -LHB_E_STATE); /* past the last sample */
-    CHECK(lhb_capture_feed(&c, samples + NS - 500u, 500u));
-    /* done, not yet finalising: a late data-ready interrupt's sample is still kept */
-    for (int a = 0; a < 6; a++) {
-        raw[a] = (int16_t)(a - 3);
-    }
-    CHECK_EQ(lhb_capture_add_imu(&c, NS - 1u, raw), LHB_OK);
-    kept++;
-    run_poll_until_ready(&c, 1);
-    CHECK_EQ(c.state, LHB_STATE_READY);
-    CHECK_EQ(c.imu.n, 8);
-    CHECK_EQ(lhb_capture_add_imu(&c, NS - 1u, raw), -LHB_E_STATE); /* ready: ignored */
+    CHECK_EQ(capture_v2(&c, &hw, &t2, LHB_FINALISE_STEP), 1);
     size_t n1 = reference_image(&t, samples, NS, v1);
     uint32_t edges = lhb_get_le32(v1 + 40);
     memcpy(want, v1, 108);
@@ -242,7 +255,21 @@ int main(void)
         }
     }
     CHECK(ok);
+    /* the CRC handed from poll to poll, edge records to IMU records included, gives the
+     * same image: steps of one record, a few, ending just before, at and after the last
+     * edge record, and all but the last record */
+    uint32_t records = edges + 8u;
+    uint32_t steps[] = {1u, 3u, edges - 1u, edges, edges + 1u, records - 1u};
+    for (size_t k = 0; k < sizeof steps / sizeof steps[0]; k++) {
+        uint32_t polls = capture_v2(&c, &hw, &t2, steps[k]);
+        CHECK_EQ(polls, (records + steps[k] - 1u) / steps[k]);
+        CHECK_EQ(c.image_size, n);
+        CHECK_EQ(c.image_crc, lhb_get_le32(want + n - 4));
+        CHECK_EQ(lhb_capture_read(&c, 0, got, (uint32_t)n), LHB_OK);
+        CHECK(memcmp(got, want, n) == 0);
+    }
     /* a capture that stops early drops the IMU records past its last sample */
+    int16_t raw[6] = {0};
     lhb_capture_init(&c, &hw, storage, 5, &t2);
     lhb_capture_set_imu(&c, imu_storage, NI);
     CHECK_EQ(lhb_capture_arm(&c, 2, 0, 0, 0), LHB_OK);

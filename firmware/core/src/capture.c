@@ -15,6 +15,7 @@ void lhb_capture_init(lhb_capture_t *c, const lhb_hw_t *hw, uint32_t *storage,
         c->hw = *hw;
     }
     c->tmpl = *tmpl;
+    c->finalise_step = LHB_FINALISE_STEP;
     /* the image size must fit in u32: cap the record count accordingly */
     uint32_t max_records =
         (0xFFFFFFFFu - LHCAP_HEADER_LEN_IMU - LHCAP_TRAILER_LEN) / LHCAP_RECORD_LEN;
@@ -174,7 +175,8 @@ static uint32_t crc_words(uint32_t crc, const uint32_t *words, uint32_t n)
 static bool finalise_step(lhb_capture_t *c)
 {
     uint32_t total = c->edges.n + c->imu.n; /* records: edges first, then IMU */
-    uint32_t end = c->crc_next + LHB_FINALISE_STEP;
+    uint32_t step = c->finalise_step != 0u ? c->finalise_step : LHB_FINALISE_STEP;
+    uint32_t end = c->crc_next + step;
     if (end > total || end < c->crc_next) {
         end = total;
     }

@@ -38,6 +38,8 @@ typedef struct {
     lhcap_header_t tmpl;      /* sample rate, board id, fw version, channel map, extra flags */
     uint32_t fixed_samples;   /* != 0: capture exactly this many samples (virtual board) */
     bool fixed_start_time;    /* true: keep tmpl.start_time_us (virtual board) */
+    uint32_t finalise_step;   /* records to CRC per poll while finalising (init: LHB_FINALISE_STEP;
+                                 tests set it small to hand the CRC across many polls) */
 
     volatile uint32_t state;  /* lhb_state_t */
     uint32_t duration_ms;
@@ -62,7 +64,8 @@ typedef struct {
     uint32_t flags;           /* lhcap flags of the current capture */
 } lhb_capture_t;
 
-/* Records to CRC per lhb_capture_poll() call while finalising. */
+/* Records to CRC per lhb_capture_poll() call while finalising (the default of
+ * lhb_capture_t.finalise_step). */
 #define LHB_FINALISE_STEP 8192u
 
 void lhb_capture_init(lhb_capture_t *c, const lhb_hw_t *hw, uint32_t *storage,
