@@ -13,7 +13,10 @@ when it stops (issue #14's run-time target: a 120 s deck log in <= 5 s).
    linearisation (and, inside it, the Python factor callbacks of
    :class:`~lhgraph.estimation.graph.evaluator.FactorEvaluator`), the back-substitution,
    the retraction and everything else, per iteration.
-4. How well LM's answer is determined: the default graph (the same noise levels) run to
+4. What still moves: the default solve once more, recording after every accepted step how
+   many board states turned by more than 1 mrad and 0.1 rad, the largest turn and how far
+   station 1 moved (where the iterations past the first ten go).
+5. How well LM's answer is determined: the default graph (the same noise levels) run to
    convergence, then LM again from that answer with station 1 moved by each of
    ``--perturb-mm`` along its x axis: iterations, final error and the distance of the new
    answer from the first (when LM finds a lower error elsewhere, the landscape is flat there
@@ -41,7 +44,7 @@ from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import LMParams, levenberg_marquardt
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import graph_preparation, solve_graph
-from lhgraph.estimation.graph.variables import STATION_POSE, initial_values
+from lhgraph.estimation.graph.variables import BOARD_POSE, STATION_POSE, initial_values
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.problem import build_problem
 from lhgraph.geometry.transforms import rotation_angle
@@ -58,6 +61,7 @@ LOG = LOGS["lh1"]
 STAGES = {"elimination": "eliminateMultifrontal", "linearisation": "linearize",
           "back-substitution": "optimize", "retraction": "retract"}
 """Table row -> the name of the GTSAM built-in whose time it is."""
+DEFAULT_CAP = GraphOptions().max_iterations
 
 
 def builtin_seconds(stats: pstats.Stats, name: str) -> float:
@@ -72,15 +76,57 @@ def callback_seconds(stats: pstats.Stats) -> float:
                if k[0].endswith("graph/evaluator.py") and k[2] == "error")
 
 
-def perturbed(board, angles, models, perturb_mm: list[float], cap: int) -> list[str]:
-    """Table rows of step 4: LM to convergence (limit ``cap``), then again from its answer
-    with station 1 moved by each distance (mm) along its own x axis."""
+def default_graph(board, angles, models, cap: int):
+    """The default solve's graph, evaluator, initial values, LM parameters (limit ``cap``)
+    and options, as ``solve_graph`` builds them for this log."""
     options = GraphOptions(max_iterations=cap)
     angles, options, _ = graph_preparation(angles, options, None, models)
     problem = build_problem(board, angles, models, angles.stations()[0])
     graph, ev = build_graph(problem, options)
     values = initial_values(ev.layout, FewDiodeInitialiser()(board, angles, problem))
-    params = LMParams.from_options(options)
+    return graph, ev, values, LMParams.from_options(options), options
+
+
+class StepRecorder:
+    """The noise hook of the default solve, recording after every accepted LM step how far
+    the board states turned (rad) and station 1 moved (m) since the step before."""
+
+    def __init__(self, hook: NoiseAdaptation, layout):
+        self.hook, self.keys = hook, layout.keys(BOARD_POSE)
+        self.rows: list[tuple[int, int, float, float]] = []
+        self._last = None
+
+    def __call__(self, values: gtsam.Values) -> bool:
+        R = np.stack([values.atPose3(k).rotation().matrix() for k in self.keys])
+        p1 = values.atPose3(STATION_POSE.key(1)).translation()
+        if self._last is not None:
+            R0, q1 = self._last
+            turn = np.arccos(np.clip((np.einsum("kij,kij->k", R0, R) - 1.0) / 2.0, -1, 1))
+            self.rows.append((int(np.sum(turn > 1e-3)), int(np.sum(turn > 0.1)),
+                              float(turn.max()), float(np.linalg.norm(p1 - q1))))
+        self._last = (R, p1)
+        return self.hook(values)
+
+
+def still_moving(board, angles, models, cap: int, every: int = 5) -> list[str]:
+    """Table rows of step 4 (section 3): per accepted step of the default solve (every
+    ``every``-th and the last), how many board states still turn and how far station 1
+    moves."""
+    graph, ev, values, params, options = default_graph(board, angles, models, cap)
+    recorder = StepRecorder(NoiseAdaptation(graph, ev, options), ev.layout)
+    levenberg_marquardt(graph, values, ev.cost, ev.layout, params, recorder)
+    rows = []
+    for i, (n_mrad, n_big, largest, moved) in enumerate(recorder.rows, start=2):
+        if i % every == 0 or i == len(recorder.rows) + 1:
+            rows.append(f"| {i} | {n_mrad} | {n_big} | {np.degrees(largest):.1f} | "
+                        f"{moved * 1e3:.3f} |")
+    return rows
+
+
+def perturbed(board, angles, models, perturb_mm: list[float], cap: int) -> list[str]:
+    """Table rows of step 5 (section 4): LM to convergence (limit ``cap``), then again from
+    its answer with station 1 moved by each distance (mm) along its own x axis."""
+    graph, ev, values, params, options = default_graph(board, angles, models, cap)
     first = levenberg_marquardt(graph, values, ev.cost, ev.layout, params,
                                 NoiseAdaptation(graph, ev, options))
     key = STATION_POSE.key(1)
@@ -162,7 +208,14 @@ def main() -> int:
         if stage == "linearisation":
             lines.append(f"| of which Python factor callbacks | {callbacks:.2f} | "
                          f"{callbacks / n:.3f} | {callbacks / total:.0%} |")
-    lines += ["", "## 3. LM again from its own answer with station 1 moved", "",
+    lines += ["", "## 3. What still moves: the board states and station 1 after each accepted "
+              f"step (the default solve, its {DEFAULT_CAP}-iteration limit)", "",
+              "A state turns when its rotation changed since the step before; station 1's move "
+              "is its position's.", "",
+              "| step | states turning > 1 mrad | > 0.1 rad | largest turn deg | station 1 "
+              "moved mm |", "|---|---|---|---|---|"]
+    lines += still_moving(board, angles, models, DEFAULT_CAP)
+    lines += ["", "## 4. LM again from its own answer with station 1 moved", "",
               "| station 1 moved | iterations | status | final error | new answer from the "
               "first, mm |", "|---|---|---|---|---|"]
     lines += perturbed(board, angles, models, args.perturb_mm, max(args.caps))
