@@ -34,6 +34,9 @@ from lhgraph.sim.simulate import load_simulation_config, simulate, write_simulat
 from lhgraph.workflow.inputs import station_models
 from lhgraph.workflow.solve import solve
 
+FACING = "configs/simulation/facing_planar_imu.toml"
+"""Stations 170 deg apart, the planar 32-diode board, a 1 kHz IMU."""
+
 
 @pytest.fixture(scope="module")
 def deck_with_imu():
@@ -362,7 +365,7 @@ def test_facing_stations_with_a_one_sided_board_join_through_the_imu():
     from lhgraph.estimation.graph.solver import solve_graph
     from lhgraph.estimation.metrics import station_errors
 
-    sim = simulate(load_simulation_config("configs/simulation/facing_planar_imu.toml"), 1)
+    sim = simulate(load_simulation_config(FACING), 1)
     models = {k: s.model for k, s in sim.truth.stations.items()}
     with pytest.raises(SolverError, match="never seen by it and the reference"):
         solve_graph(sim.board, sim.angles, models)
@@ -377,6 +380,18 @@ def test_facing_stations_with_a_one_sided_board_join_through_the_imu():
     tied_error = station_errors(sim.truth, tied.stations)[0]
     assert tied_error.rotation_rad < 0.5 * error.rotation_rad
     assert np.degrees(tied_error.rotation_rad) < 0.05 and tied_error.position_norm_m < 2e-3
+    # the preintegrated gyro's noise is learned from its residuals: from the loose 0.02
+    # rad/s down to about the simulated part's 0.002 per reading; held at 0.02, station 1's
+    # covariance is several times wider than its error (NEES 0.9 of 6 over six captures)
+    part = load_simulation_config(FACING).imu.gyro_sigma_rad_s
+    learned = tied.diagnostics["preintegration_sigma_rad_s"]
+    assert 0.7 * part < learned < 1.5 * part, learned
+    fixed = solve_graph(sim.board, sim.angles, models, GraphOptions(
+        gyro_preintegration=True, adapt_gyro_sigma=False), imu=sim.imu.stream)
+    assert fixed.diagnostics["preintegration_sigma_rad_s"] == 0.02
+    rotation_sigma = [np.sqrt(np.trace(r.stations.relative_to_reference().stations[1]
+                                       .covariance[:3, :3])) for r in (tied, fixed)]
+    assert rotation_sigma[0] < 0.5 * rotation_sigma[1], rotation_sigma
 
 
 def test_preintegrated_gyro_jacobians_match_numerical(miscalibrated_imu):
@@ -433,7 +448,7 @@ def test_board_capture_carries_the_imu_to_the_solve(tmp_path):
     from lhgraph.estimation.graph.solver import solve_graph
     from lhgraph.estimation.metrics import station_errors
 
-    config = "configs/simulation/facing_planar_imu.toml"
+    config = FACING
     sim_dir, dec_dir = tmp_path / "sim", tmp_path / "dec"
     assert main(["simulate", config, "--seed", "1", "--capture", "--output", str(sim_dir),
                  "--quiet"]) == 0
@@ -455,7 +470,11 @@ def test_reading_noise_and_the_accelerometer_factor_sigma():
     # the difference-based estimate finds a white noise under a smooth hand-held signal;
     # the options take 4x it for the accelerometer factors, within [floor, ceiling]
     from lhgraph.estimation.graph.options import GraphOptions
-    from lhgraph.estimation.inertial import ACCEL_FACTOR_NOISE_RATIO, reading_noise
+    from lhgraph.estimation.inertial import (
+        ACCEL_FACTOR_NOISE_RATIO,
+        gyro_reading_sigma,
+        reading_noise,
+    )
 
     rng = np.random.default_rng(4)
     t = np.arange(0, 60, 0.01)
@@ -463,6 +482,8 @@ def test_reading_noise_and_the_accelerometer_factor_sigma():
     sigma = np.array([0.02, 0.05, 0.1])
     noisy = smooth + rng.normal(0, 1, smooth.shape) * sigma
     assert np.allclose(reading_noise(noisy), sigma, rtol=0.1)
+    assert gyro_reading_sigma(ImuStream(t, np.zeros_like(noisy), noisy)) == pytest.approx(
+        0.1, rel=0.1)  # the noisiest axis
     stream = ImuStream(t, noisy, np.zeros_like(noisy))
     adapted = GraphOptions().for_imu(stream)
     assert adapted.accel_sigma_mps2 == pytest.approx(ACCEL_FACTOR_NOISE_RATIO * 0.1, rel=0.1)

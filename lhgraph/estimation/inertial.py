@@ -74,6 +74,14 @@ def accel_factor_sigma(imu: ImuStream) -> float:
     return ACCEL_FACTOR_NOISE_RATIO * float(np.max(reading_noise(imu.accel_mps2)))
 
 
+def gyro_reading_sigma(imu: ImuStream) -> float:
+    """Noise (rad/s) of one gyro reading of the stream ``imu``: :func:`reading_noise` of its
+    gyro, the largest axis (the preintegrated gyro factors integrate it). Measured: 0.0020
+    rad/s on the simulated default part at 1 kHz, 0.0013 on hive's tracker (250 Hz), 0.048 on
+    the real Crazyflie log, whose 100 Hz samples carry the hand's motion too."""
+    return float(np.max(reading_noise(imu.gyro_rad_s)))
+
+
 @dataclass(frozen=True)
 class InertialData:
     """The IMU readings at a problem's K board states: ``rate`` (K, 3) the gyro at each

@@ -137,6 +137,13 @@ class FactorEvaluator:
         if self._values is not None:
             self._scale_residuals()
 
+    def scale_preintegration_noise(self, factor: float) -> None:
+        """Multiply the preintegrated gyro factors' variance by ``factor`` (at an evaluated
+        point; no-op without them)."""
+        if self.imu is not None and len(self.imu.preintegrated):
+            self.imu.scale_preintegration_noise(factor)
+            self._jacobians_ready = False
+
     def angle_sigma(self) -> float:
         """Effective per-diode angle noise (rad) now."""
         return self._sigma0 / self._bearing_scale
@@ -239,7 +246,8 @@ class FactorEvaluator:
         """Callback of the i-th preintegrated gyro factor (step ``k = imu.preintegrated[i]``;
         keys: pose k, pose k + 1, IMU bias)."""
         k = int(self.imu.preintegrated[i])
-        return self._callback((k, k + 1), i, lambda: self.imu.p, lambda: self.imu.Hp)
+        return self._callback((k, k + 1), i, lambda: self.imu.p_scaled,
+                              lambda: self.imu.Hp)
 
     def motion_error(self, k: int) -> FactorError:
         """Callback of the motion prior between states k and k + 1."""

@@ -14,7 +14,9 @@ k -> k + 1 the gyro's readings between the two states, bias-corrected (and scale
 integrated into the rotation ``dR_k`` (at the IMU's own rate, in sub-steps of at most one
 sample period); the
 residual is ``Log(dR_k^T R_k^T R_k+1)`` (3, rad), its noise ``gyro_sigma_rad_s`` per reading
-integrated over the step, ``sigma sqrt(dt / rate)``. It uses every reading, where the gyro
+integrated over the step, ``sigma sqrt(dt / rate)``; the noise hook may rescale it
+(:meth:`ImuTerms.scale_preintegration_noise`, ``adapt_gyro_sigma``) down to the stream's own
+reading noise (:attr:`ImuTerms.reading_sigma`). It uses every reading, where the gyro
 factor reads one per state: across a turn that no station sees (no states for a third of a
 second) it ties the rotation on both sides. Jacobians: the two poses' rotations and the gyro
 bias (first order, ``d dR / d b`` accumulated with the product); the calibration is held at
@@ -34,7 +36,7 @@ from lhgraph.estimation.graph.variables import (
     IMU_CALIBRATION,
     VariableLayout,
 )
-from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, InertialData
+from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, InertialData, gyro_reading_sigma
 from lhgraph.estimation.residuals import accel_residuals, gyro_residuals
 from lhgraph.geometry.transforms import skew, so3_exp, so3_log, so3_right_jacobian
 from lhgraph.io.imu import STANDARD_GRAVITY_MPS2
@@ -73,9 +75,34 @@ class ImuTerms:
                                                   & (data.dt > 0)))
         """Steps k (k -> k + 1) with a preintegrated gyro factor."""
         self.preintegration_sigmas = np.zeros(0)
-        """Noise (rad) of each preintegrated gyro factor."""
+        """Noise (rad) of each preintegrated gyro factor (its noise model's: at
+        ``gyro_sigma_rad_s``)."""
+        self._pre_scale = 1.0  # 1/sqrt(f): the preintegrated factors' variance is f times theirs
+        self.reading_sigma = options.gyro_sigma_rad_s
+        """The lowest reading noise the preintegrated factors may be rescaled to (rad/s): the
+        stream's own within [``min_gyro_sigma_rad_s``, ``gyro_sigma_rad_s``]."""
         if len(self.preintegrated):
             self._substeps(options.gyro_sigma_rad_s)
+            self.reading_sigma = float(np.clip(gyro_reading_sigma(data.stream),
+                                               options.min_gyro_sigma_rad_s,
+                                               options.gyro_sigma_rad_s))
+
+    def scale_preintegration_noise(self, factor: float) -> None:
+        """Multiply the preintegrated gyro factors' variance by ``factor`` (their residuals
+        and Jacobians are scaled instead of their noise models)."""
+        self._pre_scale /= np.sqrt(factor)
+        self.p_scaled = self.p * self._pre_scale
+
+    def preintegration_sigma(self) -> float:
+        """The preintegrated factors' effective reading noise now (rad/s)."""
+        return self.gyro_sigma / self._pre_scale
+
+    def preintegration_chi2_per_dof(self) -> float:
+        """Mean squared whitened preintegrated-gyro residual per degree of freedom at the
+        current noise (nan without such factors)."""
+        if not len(self.preintegrated):
+            return float("nan")
+        return float(np.mean((self.p_scaled / self.preintegration_sigmas[:, None]) ** 2))
 
     def matches(self, values: gtsam.Values) -> bool:
         """Whether ``values`` hold the IMU variables of the last :meth:`read`."""
@@ -141,6 +168,8 @@ class ImuTerms:
         k = self.preintegrated
         R0, R1 = self._X[k, :3, :3], self._X[k + 1, :3, :3]
         self.p = so3_log(np.swapaxes(dR, 1, 2) @ np.swapaxes(R0, 1, 2) @ R1)
+        self.p_scaled = self.p * self._pre_scale
+        """The residuals the factors see: ``p`` scaled to the current noise."""
 
     def jacobians(self) -> None:
         """``Hg`` and ``Ha`` at the point of the last :meth:`read`."""
@@ -183,7 +212,7 @@ class ImuTerms:
         H0[:, :, :3] = -Jl_inv @ np.swapaxes(self._dR, 1, 2)
         H1[:, :, :3] = so3_right_jacobian(self.p, inverse=True)
         Hb[:, :, :3] = -Jl_inv @ self._J_bias
-        self.Hp = (H0, H1, Hb)
+        self.Hp = tuple(H * self._pre_scale for H in (H0, H1, Hb))
 
     def cost(self) -> float:
         """Half the squared whitened gyro, accelerometer, gravity-magnitude and calibration
@@ -193,7 +222,7 @@ class ImuTerms:
         a = self.a[d.force_ok] / self.accel_sigmas[d.force_ok, None]
         m = (np.linalg.norm(self.imu[6:]) - STANDARD_GRAVITY_MPS2) / GRAVITY_SIGMA_MPS2
         c = self.C / self.calibration_sigmas if self.calibration is not None else np.zeros(0)
-        p = (self.p / self.preintegration_sigmas[:, None] if len(self.preintegrated)
+        p = (self.p_scaled / self.preintegration_sigmas[:, None] if len(self.preintegrated)
              else np.zeros(0))
         return 0.5 * float(np.sum(g * g) + np.sum(a * a) + m * m + np.sum(c * c)
                            + np.sum(p * p))
@@ -205,13 +234,16 @@ class ImuTerms:
                 np.where(self.data.force_ok[:, None], self.a, np.nan))
 
     def summary(self) -> dict[str, float]:
-        """The biases' norms, the gravity's magnitude, the rms residuals and, with the
-        calibration, the gyro scales (``1 + s``) and the time offset (s)."""
+        """The biases' norms, the gravity's magnitude, the rms residuals, with the
+        calibration the gyro scales (``1 + s``) and the time offset (s), and with the
+        preintegrated gyro its effective reading noise (rad/s)."""
         gyro, accel = self.residuals()
         calibration = {} if self.calibration is None else {
             "gyro_scale_x": 1.0 + float(self.C[0]), "gyro_scale_y": 1.0 + float(self.C[1]),
             "gyro_scale_z": 1.0 + float(self.C[2]), "imu_time_offset_s": float(self.C[3]),
             "imu_rotation_deg": float(np.degrees(np.linalg.norm(self.C[4:])))}
+        if len(self.preintegrated):
+            calibration["preintegration_sigma_rad_s"] = self.preintegration_sigma()
         return calibration | {"gyro_bias_rad_s": float(np.linalg.norm(self.imu[:3])),
                               "accel_bias_mps2": float(np.linalg.norm(self.imu[3:6])),
                               "gravity_mps2": float(np.linalg.norm(self.imu[6:])),

@@ -9,8 +9,13 @@ per degree of freedom (so the prior matches how the board actually moved), withi
 prior's residual (on a 2 s simulated capture 86 % of its rows' hat-matrix trace), so the plain
 mean square underestimates the prior's variance several times over. The diodes' noise is set to
 the residuals' robust spread (MAD), within [1, ``max_sigma_factor``] times
-``angle_sigma_rad`` (the 2 MHz quantisation). At most ``motion_prior_rounds`` updates change
-the levels; an update whose ratios all lie in (0.8, 1.25) changes nothing.
+``angle_sigma_rad`` (the 2 MHz quantisation). With ``adapt_gyro_sigma`` and preintegrated
+gyro factors, their reading noise is rescaled until their whitened residuals have unit
+variance, within [the stream's own reading noise, ``gyro_sigma_rad_s``]: a fit that absorbs
+part of the gyro's noise cannot take it below what the readings show, and a gyro that does not
+fit the light (a scale error not solved) keeps the loose ceiling. At most
+``motion_prior_rounds`` updates change the levels; an update whose ratios all lie in
+(0.8, 1.25) changes nothing.
 """
 
 from __future__ import annotations
@@ -81,7 +86,7 @@ class NoiseAdaptation:
     @staticmethod
     def enabled(options: GraphOptions) -> bool:
         """Whether ``options`` adapt any noise level."""
-        return options.adapt_motion_prior or options.adapt_angle_sigma
+        return options.adapt_motion_prior or options.adapt_angle_sigma or options.adapt_gyro_sigma
 
     def __call__(self, values: gtsam.Values) -> bool:
         if self.rounds_left <= 0:
@@ -118,14 +123,30 @@ class NoiseAdaptation:
             noise = float(np.clip(sigma_hat, options.angle_sigma_rad,
                                   options.max_sigma_factor * options.angle_sigma_rad)
                           / ev.angle_sigma())**2
+        gyro = self._gyro_ratio()
         if self.progress:
             self.progress(f"motion prior: chi2/dof {chi2:.3g} (PSD scaled by {ratio:.3g}); "
-                          f"angle noise {sigma_hat * 1e6:.1f} urad")
-        if 0.8 < ratio < 1.25 and 0.8 < noise < 1.25:
+                          f"angle noise {sigma_hat * 1e6:.1f} urad"
+                          + ("" if ev.imu is None or not len(ev.imu.preintegrated) else
+                             f"; preintegrated gyro noise "
+                             f"{ev.imu.preintegration_sigma() * np.sqrt(gyro):.2g} rad/s"))
+        if 0.8 < ratio < 1.25 and 0.8 < noise < 1.25 and 0.8 < gyro < 1.25:
             return False
         ev.scale_motion_prior(ratio)
         ev.scale_bearing_noise(noise)
+        ev.scale_preintegration_noise(gyro)
         return True
+
+    def _gyro_ratio(self) -> float:
+        """The preintegrated gyro factors' variance factor: their chi2 per degree of freedom,
+        within [the stream's reading noise, ``gyro_sigma_rad_s``] (1 without them or
+        ``adapt_gyro_sigma``)."""
+        imu = self.evaluator.imu
+        if not self.options.adapt_gyro_sigma or imu is None or not len(imu.preintegrated):
+            return 1.0
+        now = imu.preintegration_sigma()
+        return float(np.clip(imu.preintegration_chi2_per_dof(), (imu.reading_sigma / now) ** 2,
+                             (self.options.gyro_sigma_rad_s / now) ** 2))
 
     def _motion_redundancy(self, values: gtsam.Values) -> tuple[int, float]:
         """The motion prior's rows and redundancy at ``values`` (:func:`redundancy`)."""
