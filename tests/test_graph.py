@@ -487,3 +487,32 @@ def test_limit_board_steps_scales_only_the_states_beyond_the_trust_region():
     # nothing beyond the limits any more: nothing scaled, said so
     assert not limit_board_steps(delta, layout, max_rad=0.3, max_m=0.1)
     np.testing.assert_allclose(delta.at(BOARD_POSE.key(1)), steps[1] / 2)
+
+
+def test_an_undetermined_variable_is_named_as_the_user_knows_it():
+    # GTSAM's indeterminate-system error names a key (Symbol: x12); the solver's one line
+    # says which board state that is (time, station, hits, the gaps around it), or which
+    # station, and falls back to the general sentence when the message names no variable
+    from lhgraph.estimation.graph.solver import undetermined
+
+    sim = _capture("default", duration_s=1.0)
+    problem, _, ev, _ = _graph(sim, GraphOptions())
+    k = 12
+    blind = gtsam.GaussianFactorGraph()  # no information on board pose k: Cholesky fails
+    blind.add(gtsam.JacobianFactor(BOARD_POSE.key(k), np.zeros((6, 6)), np.zeros(6),
+                                   gtsam.noiseModel.Unit.Create(6)))
+    with pytest.raises(RuntimeError) as err:
+        blind.eliminateMultifrontal(gtsam.Ordering.ColamdGaussianFactorGraph(blind))
+    line = undetermined(str(err.value), ev.layout, problem)
+    t = problem.state_time
+    a, b = problem.bounds[k], problem.bounds[k + 1]
+    station = problem.station_ids[problem.state_station[k]]
+    assert line.startswith("the linearised problem cannot be solved: board pose 12 (t = "
+                           f"{t[k] - t[0]:.3f} s, station {station}: {b - a} hits of ")
+    assert f"{t[k] - t[k - 1]:.3f} s before, {t[k + 1] - t[k]:.3f} s after)" in line
+    assert "\n" not in line
+    station_line = undetermined("Indeterminate linear system detected while working near "
+                                f"variable\n{STATION_POSE.key(1)} (Symbol: l1).", ev.layout,
+                                problem)
+    assert f"station {problem.station_ids[1]} is not determined" in station_line
+    assert "some board state or station" in undetermined("out of memory", ev.layout, problem)

@@ -8,6 +8,7 @@ problem (:mod:`lhgraph.estimation.problem`) -> initial values (an
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -27,7 +28,7 @@ from lhgraph.estimation.graph.optimizer import (
     levenberg_marquardt,
 )
 from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.variables import STATION_POSE, initial_values
+from lhgraph.estimation.graph.variables import STATION_POSE, VariableLayout, initial_values
 from lhgraph.estimation.inertial import InertialData, inertial_data, initial_gravity
 from lhgraph.estimation.init import Initialiser
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
@@ -155,10 +156,41 @@ def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation
         cov = {slot: fit.covariance(STATION_POSE.key(slot))
                for slot in ev.layout.indices(STATION_POSE)}
     except RuntimeError as err:  # gtsam's IndeterminateLinearSystemException and kin
-        first = next((line.strip() for line in str(err).splitlines() if line.strip()), "")
-        raise SolverError(f"the linearised problem cannot be solved ({first}): some board "
-                          "state or station is not determined by the data") from err
+        raise SolverError(undetermined(str(err), ev.layout, problem)) from err
     return fit, ev, cov
+
+
+def undetermined(message: str, layout: VariableLayout, problem: GraphProblem) -> str:
+    """One line for a GTSAM error ``message`` raised while solving the graph of ``problem``:
+    the variable it names (GTSAM: ``(Symbol: x1495)``) as the user knows it (a board state:
+    its time from the capture's first state, its station, how many hits of how many diodes it
+    has and how far the states around it are), or that some variable is not determined when
+    the message names none."""
+    first = next((line.strip() for line in message.splitlines() if line.strip()), "")
+    found = re.search(r"Symbol: ([A-Za-z])(\d+)", message)
+    family = None if found is None else next(
+        (f for f in layout.families if f.symbol == found[1]), None)
+    if family is None:
+        return (f"the linearised problem cannot be solved ({first}): some board state or "
+                "station is not determined by the data")
+    index = int(found[2])
+    what = f"{family.name} {index}"
+    if family.elimination == "chain" and index < problem.n_states:
+        t = problem.state_time
+        a, b = problem.bounds[index], problem.bounds[index + 1]
+        before = f"{t[index] - t[index - 1]:.3f} s before" if index > 0 else "none before"
+        after = (f"{t[index + 1] - t[index]:.3f} s after" if index + 1 < len(t)
+                 else "none after")
+        what += (f" (t = {t[index] - t[0]:.3f} s, station "
+                 f"{problem.station_ids[problem.state_station[index]]}: {b - a} hits of "
+                 f"{len(np.unique(problem.hit_sensor[a:b]))} diodes; the nearest states "
+                 f"{before}, {after})")
+    elif family.name == STATION_POSE.name and index < len(problem.station_ids):
+        what = f"station {problem.station_ids[index]}"
+    return (f"the linearised problem cannot be solved: {what} is not determined by the data "
+            "(GTSAM: indeterminate linear system); another robust loss, a stiffer motion "
+            "prior (a lower max_psd_factor) or leaving that stretch of the capture out may "
+            "help")
 
 
 def graph_preparation(angles: Angles, options: GraphOptions,
