@@ -30,6 +30,7 @@ Prints the table and writes it to ``--output``. Skips (one line, exit 0) without
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import sys
 import tempfile
@@ -56,6 +57,7 @@ from hive_slice_spread import in_slice  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 BAG = REPO.parent / "shared/data/hive-env8/data8.11.bag"
+DEFAULT_OUTPUT = REPO / "docs/results/hive_imu.md"
 CALIBRATED = GraphOptions(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02)
 VARIANTS = {"light only": (False, GraphOptions()),
             "IMU as read": (True, GraphOptions()),
@@ -77,7 +79,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--bag", type=Path, default=BAG)
     ap.add_argument("--slices", type=int, default=3)
-    ap.add_argument("--output", type=Path, default=REPO / "docs/results/hive_imu.md")
+    ap.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
     args = ap.parse_args()
     if not args.bag.is_file():
         print(f"skipped: {args.bag} not found")
@@ -92,7 +94,9 @@ def main() -> int:
         models = station_models(Path(tmp) / "ootx.toml", Convention(-1, 1))
     t0 = motion_start(angles)
     lines = ["# The hive recording with its IMU", "",
-             f"Command: `python3 benchmarks/hive_imu.py --slices {args.slices}`  ",
+             f"Command: `python3 benchmarks/hive_imu.py --slices {args.slices}"
+             + ("" if args.output == DEFAULT_OUTPUT
+                else f" --output {os.path.relpath(args.output, REPO)}") + "`  ",
              f"Machine: {platform.machine()}, Python {platform.python_version()}; "
              f"{time.strftime('%Y-%m-%d')}. Factory calibration gib -1, curve +1; slices of 8 s "
              "from the motion start, 4 s apart, each against the whole bag of the same "
