@@ -137,10 +137,14 @@ class FactorEvaluator:
         if self._values is not None:
             self._scale_residuals()
 
+    def preintegrated_gyro(self) -> ImuTerms | None:
+        """The IMU terms when the graph has preintegrated gyro factors (else None)."""
+        return self.imu if self.imu is not None and len(self.imu.preintegrated) else None
+
     def scale_preintegration_noise(self, factor: float) -> None:
         """Multiply the preintegrated gyro factors' variance by ``factor`` (at an evaluated
         point; no-op without them)."""
-        if self.imu is not None and len(self.imu.preintegrated):
+        if self.preintegrated_gyro() is not None:
             self.imu.scale_preintegration_noise(factor)
             self._jacobians_ready = False
 

@@ -26,6 +26,7 @@ import gtsam
 import numpy as np
 
 from lhgraph.estimation.graph.evaluator import FactorEvaluator
+from lhgraph.estimation.graph.imu_terms import ImuTerms
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.spread import robust_sigma
 
@@ -123,13 +124,14 @@ class NoiseAdaptation:
             noise = float(np.clip(sigma_hat, options.angle_sigma_rad,
                                   options.max_sigma_factor * options.angle_sigma_rad)
                           / ev.angle_sigma())**2
-        gyro = self._gyro_ratio()
+        imu = ev.preintegrated_gyro()
+        gyro = 1.0 if imu is None else self._gyro_ratio(imu)
         if self.progress:
             self.progress(f"motion prior: chi2/dof {chi2:.3g} (PSD scaled by {ratio:.3g}); "
                           f"angle noise {sigma_hat * 1e6:.1f} urad"
-                          + ("" if ev.imu is None or not len(ev.imu.preintegrated) else
+                          + ("" if imu is None else
                              f"; preintegrated gyro noise "
-                             f"{ev.imu.preintegration_sigma() * np.sqrt(gyro):.2g} rad/s"))
+                             f"{imu.preintegration_sigma() * np.sqrt(gyro):.2g} rad/s"))
         if 0.8 < ratio < 1.25 and 0.8 < noise < 1.25 and 0.8 < gyro < 1.25:
             return False
         ev.scale_motion_prior(ratio)
@@ -137,12 +139,11 @@ class NoiseAdaptation:
         ev.scale_preintegration_noise(gyro)
         return True
 
-    def _gyro_ratio(self) -> float:
-        """The preintegrated gyro factors' variance factor: their chi2 per degree of freedom,
-        within [the stream's reading noise, ``gyro_sigma_rad_s``] (1 without them or
+    def _gyro_ratio(self, imu: ImuTerms) -> float:
+        """The variance factor of ``imu``'s preintegrated gyro factors: their chi2 per degree
+        of freedom, within [the stream's reading noise, ``gyro_sigma_rad_s``] (1 without
         ``adapt_gyro_sigma``)."""
-        imu = self.evaluator.imu
-        if not self.options.adapt_gyro_sigma or imu is None or not len(imu.preintegrated):
+        if not self.options.adapt_gyro_sigma:
             return 1.0
         now = imu.preintegration_sigma()
         return float(np.clip(imu.preintegration_chi2_per_dof(), (imu.reading_sigma / now) ** 2,

@@ -166,11 +166,11 @@ def undetermined(message: str, layout: VariableLayout, problem: GraphProblem) ->
     its time from the capture's first state, its station, how many hits of how many diodes it
     has and how far the states around it are), or that some variable is not determined when
     the message names none."""
-    first = next((line.strip() for line in message.splitlines() if line.strip()), "")
     found = re.search(r"Symbol: ([A-Za-z])(\d+)", message)
     family = None if found is None else next(
         (f for f in layout.families if f.symbol == found[1]), None)
     if family is None:
+        first = next((line.strip() for line in message.splitlines() if line.strip()), "")
         return (f"the linearised problem cannot be solved ({first}): some board state or "
                 "station is not determined by the data")
     index = int(found[2])
