@@ -206,3 +206,38 @@ def test_cross_station_cost_with_one_measurement_of_the_other_station():
     assert cost.shape == (3, 2)
     assert np.all(cost[:, 0] < 1e-12)  # the true orientation is common to both stations
     assert np.all(cost[:, 1] > 30)  # the mirror twins are 1 rad apart: (1 / 0.15)^2 = 44
+
+
+def test_partial_view_cost_prefers_the_true_twin(deck_capture):
+    # the other station's few-diode sweeps near each measurement tell its twins apart, and
+    # with that cost the Viterbi keeps fewer wrong twins
+    from lhgraph.estimation.init.few_diode import cross_station_cost, partial_view_cost
+
+    cap = deck_capture
+    angles = retime_cycles(cap.angles)
+    models = {i: cap.truth.stations[i].model for i in cap.truth.indices()}
+    problem = build_problem(cap.board, angles, models, 0)
+    init = FewDiodeInitialiser()
+    twins = init._twins(cap.board, angles, problem)
+    T0 = cap.truth.pose(0)
+    L = np.stack([inverse(T0) @ cap.truth.pose(s) for s in problem.station_ids])
+    wrong = {}
+    for slot, tw in enumerate(twins):
+        R_true = (inverse(L[slot]) @ inverse(T0) @ cap.trajectory.at(tw.time))[:, :3, :3]
+        err = np.degrees(rotation_angle(np.swapaxes(R_true[:, None], -1, -2)
+                                        @ tw.T_lh_board[..., :3, :3]))  # (M, 2)
+        cost = partial_view_cost(twins, problem, L, slot, 3e-4, 0.05)
+        clear = (np.nanmin(err, axis=1) < 5) & (np.nanmax(err, axis=1) > 30)
+        seen = clear & (cost.max(axis=1) > 0) & np.isfinite(cost).all(axis=1)
+        true_twin = np.nanargmin(err, axis=1)
+        assert seen.sum() > 100
+        own = cost[np.arange(len(err)), true_twin]
+        other = cost[np.arange(len(err)), 1 - true_twin]
+        assert np.mean(own[seen] < other[seen]) > 0.9
+        cross = cross_station_cost(twins, L, slot, init.cross_sigma_rad, init.cross_max_gap_s,
+                                   init.turn_sigma)
+        for name, e in (("without", tw.emission + cross), ("with", tw.emission + cross + cost)):
+            choice = resolve_twins(tw.time, tw.T_lh_board[..., :3, :3], e, init.turn_sigma)
+            picked = err[np.arange(len(err)), np.maximum(choice, 0)]
+            wrong[name] = wrong.get(name, 0) + int(np.sum((picked > 10) & (choice >= 0)))
+    assert wrong["with"] < 0.75 * wrong["without"]  # 57 against 99

@@ -207,7 +207,9 @@ def graph_preparation(angles: Angles, options: GraphOptions,
       angles: both planes of a turn share a state (:func:`plane_cycles`);
     - every station LH2: the angle-noise floor ``options.lh2_angle_sigma_rad``;
     - few-diode data: the angle-noise floor ``few_diode_sigma_rad`` and, unless set, the
-      stopping rule's board-step quantile ``FEW_DIODE_STEP_QUANTILE``.
+      stopping rule's board-step quantile ``FEW_DIODE_STEP_QUANTILE``;
+    - ``motion_prior_estimate = "auto"``: ``"redundancy"`` on few-diode data, else
+      ``"chi2"``.
 
     Shared by the calibration and by tracking."""
     few = few_diode(angles)
@@ -228,6 +230,8 @@ def graph_preparation(angles: Angles, options: GraphOptions,
             options,
             angle_sigma_rad=max(options.angle_sigma_rad, options.few_diode_sigma_rad),
             board_step_quantile=options.board_step_quantile or FEW_DIODE_STEP_QUANTILE)
+    if options.motion_prior_estimate == "auto":
+        options = replace(options, motion_prior_estimate="redundancy" if few else "chi2")
     return angles, options, few
 
 
