@@ -36,7 +36,8 @@ class GraphOptions:
     freedom the fit leaves the prior; no floor, ``min_psd_factor`` unused), ``"auto"``:
     ``"redundancy"`` on few-diode data, ``"chi2"`` otherwise (on the simulated decks the
     floored chi2 prior is too stiff for a hand-held 4-diode deck: with the twins chosen well
-    its stations were 1.9 mm off with NEES 15.5, 1.3 mm with the redundancy); ``solver``:
+    its stations were 1.9 mm off with NEES 15.5, 1.0 mm with NEES 3.4 by the redundancy);
+    ``solver``:
     ``"lm"`` (Levenberg-Marquardt on GTSAM's linear solver) or ``"isam2"``;
     ``max_iterations``; LM stops when the stations are estimated to be within
     ``step_tolerance_sigma`` of their standard deviations from the converged solution and no
