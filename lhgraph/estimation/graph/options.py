@@ -34,7 +34,8 @@ class GraphOptions:
     ``"redundancy"`` to their sum over the prior's redundancy (its rows less the trace of
     their hat matrix, :func:`~lhgraph.estimation.graph.noise.redundancy`: the degrees of
     freedom the fit leaves the prior; no floor, ``min_psd_factor`` unused), ``"auto"``:
-    ``"redundancy"`` on few-diode data, ``"chi2"`` otherwise (on the simulated decks the
+    ``"redundancy"`` on few-diode data without IMU factors, ``"chi2"`` otherwise
+    (:func:`~lhgraph.estimation.graph.solver.prior_estimate`; on the simulated decks the
     floored chi2 prior is too stiff for a hand-held 4-diode deck: with the twins chosen well
     its stations were 1.9 mm off with NEES 15.5, 1.0 mm with NEES 3.4 by the redundancy);
     ``solver``:
