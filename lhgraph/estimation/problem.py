@@ -69,3 +69,11 @@ def build_problem(board: Board, angles: Angles, models: dict[int, StationModel],
     return GraphProblem(station_ids, [models.get(s, StationModel()) for s in station_ids],
                         state_time, state_station, hits, rows, bounds,
                         sensor_rows[rows], len(board.positions))
+
+
+def expand_ranges(first: NDArray[np.int64], count: NDArray[np.int64]
+                  ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The ranges ``first[j] : first[j] + count[j]`` laid end to end: each element's range
+    ``j`` and its index, both ``(count.sum(),)``."""
+    owner = np.repeat(np.arange(len(count)), count)
+    return owner, np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + first[owner]

@@ -42,7 +42,7 @@ from lhgraph.estimation.init.pnp_kabsch import (
     station_paths,
     world_states,
 )
-from lhgraph.estimation.problem import GraphProblem, build_problem
+from lhgraph.estimation.problem import GraphProblem, build_problem, expand_ranges
 from lhgraph.estimation.residuals import BearingHits, bearing_residuals
 from lhgraph.estimation.spread import robust_sigma
 from lhgraph.geometry.transforms import se3_exp
@@ -173,8 +173,7 @@ def _window_hits(problem: GraphProblem, states: NDArray[np.int64], window_s: flo
     hi = np.searchsorted(t, t[states] + window_s, side="right")
     first = problem.bounds[lo]
     count = problem.bounds[hi] - first
-    state = np.repeat(np.arange(len(states)), count)
-    rows = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + first[state]
+    state, rows = expand_ranges(first, count)
     h = problem.hits
     return BearingHits(state, h.station[rows], h.s_board[rows], h.axis[rows],
                        t[h.state[rows]] + h.dt[rows] - t[states][state], h.angle[rows])

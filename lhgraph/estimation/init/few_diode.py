@@ -27,7 +27,7 @@ from lhgraph.estimation.init.pnp_kabsch import (
     world_states,
 )
 from lhgraph.estimation.init.twins import TwinPath, chosen_path, twin_path
-from lhgraph.estimation.problem import GraphProblem
+from lhgraph.estimation.problem import GraphProblem, expand_ranges
 from lhgraph.geometry.transforms import inverse, rotation_angle
 from lhgraph.io.angles import Angles
 from lhgraph.model.board import Board
@@ -86,8 +86,8 @@ def partial_view_cost(twins: list[TwinPath], problem: GraphProblem, T_world_lh: 
         rows = rows[np.argsort(t_hit[rows], kind="stable")]
         lo = np.searchsorted(t_hit[rows], own.time - max_gap_s)
         n = np.searchsorted(t_hit[rows], own.time + max_gap_s) - lo
-        m = np.repeat(np.arange(len(own.time)), n)  # (pairs,) measurement of each pair
-        hit = rows[np.repeat(lo, n) + np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)]
+        m, at = expand_ranges(lo, n)  # (pairs,) measurement of each pair, its hit's row
+        hit = rows[at]
         if len(hit) == 0:
             continue
         s = np.c_[hits.s_board[hit], np.ones(len(hit))][..., None]  # (pairs, 4, 1)
