@@ -289,3 +289,19 @@ def test_bad_lh2_keys_name_file_and_key(tmp_path, extra, message):
                       "\nquaternion = [1, 0, 0, 0]\n" + extra)
     with pytest.raises(InputError, match=message):
         load_stations(stations)
+
+
+def test_unreadable_inputs_name_the_file_and_the_reason(tmp_path):
+    from lhgraph.cli import main
+    from lhgraph.io.files import read_toml
+
+    a_file = _write(tmp_path, "log00", "not a folder")
+    under = a_file / ".." / "system-config.yaml"  # what `LOG/../x` gives when LOG is a file
+    with pytest.raises(InputError, match=r"system-config\.yaml: file not found \(a folder"):
+        read_toml(under)
+    with pytest.raises(InputError, match=r"angles\.csv: file not found \(a folder"):
+        load_angles(a_file / "angles.csv")
+    with pytest.raises(InputError, match="is a directory, expected a TOML file"):
+        read_toml(tmp_path)
+    assert main(["import", "crazyflie", str(a_file), "--system-config", str(under),
+                 "--output", str(tmp_path / "out")]) == 2

@@ -62,6 +62,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except LhgraphError as exc:
         print(f"lhgraph {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except OSError as exc:  # a file the readers and writers did not anticipate failing
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"lhgraph {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"lhgraph {args.command}: interrupted", file=sys.stderr)
         return 130

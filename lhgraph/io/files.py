@@ -28,16 +28,27 @@ CSV_ENCODING = "utf-8-sig"
 skipped."""
 
 
+def unreadable(exc: OSError, path: str | Path, expected: str) -> InputError:
+    """The InputError for an input file ``path`` that could not be opened (``exc``):
+    missing (also when a folder on its path is a file), a directory (``expected`` says what
+    it should be, e.g. ``"a TOML file"``), or unreadable for another reason (permissions)."""
+    if isinstance(exc, FileNotFoundError):
+        return InputError("file not found", path)
+    if isinstance(exc, NotADirectoryError):
+        return InputError("file not found (a folder on its path is a file)", path)
+    if isinstance(exc, IsADirectoryError):
+        return InputError(f"is a directory, expected {expected}", path)
+    return InputError(f"cannot be read ({exc.strerror or exc})", path)
+
+
 def read_input(path: str | Path, expected: str) -> bytes:
-    """The bytes of the input file ``path``; a missing file or a directory raises InputError
-    naming it (``expected`` says what it should be, e.g. ``"a TOML file"``)."""
+    """The bytes of the input file ``path``; a file that cannot be read raises InputError
+    naming it (:func:`unreadable`)."""
     path = Path(path)
     try:
         return path.read_bytes()
-    except FileNotFoundError:
-        raise InputError("file not found", path) from None
-    except IsADirectoryError:
-        raise InputError(f"is a directory, expected {expected}", path) from None
+    except OSError as exc:
+        raise unreadable(exc, path, expected) from None
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -209,10 +220,8 @@ def read_csv_columns(
     path = Path(path)
     try:
         f = path.open(newline="", encoding=CSV_ENCODING)
-    except FileNotFoundError:
-        raise InputError("file not found", path) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a CSV file", path) from None
+    except OSError as exc:
+        raise unreadable(exc, path, "a CSV file") from None
     with f:
         reader = csv.reader(f)
         try:

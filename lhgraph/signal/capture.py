@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lhgraph.errors import InputError
-from lhgraph.io.files import read_input, write_atomic
+from lhgraph.io.files import read_input, unreadable, write_atomic
 from lhgraph.signal.capture_imu import IMU_PARTS, IMU_RECORD, CaptureImu, read_imu_records
 from lhgraph.signal.pulses import LightPulses
 
@@ -270,8 +270,8 @@ def read_raw_dump(path: str | Path, sample_rate_hz: int = 2_000_000,
     path = Path(path)
     try:
         size = path.stat().st_size
-    except FileNotFoundError:
-        raise InputError("file not found", path) from None
+    except OSError as exc:
+        raise unreadable(exc, path, "a raw dump") from None
     if path.is_dir():
         raise InputError("is a directory, expected a raw dump", path)
     if size < 4:

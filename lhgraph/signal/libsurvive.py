@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.geometry.transforms import pose_from_quat
+from lhgraph.io.files import unreadable
 from lhgraph.model.board import Board, make_board
 from lhgraph.model.calibration import StationCalibration
 from lhgraph.model.station import FactoryCalibration
@@ -163,8 +164,8 @@ def read_libsurvive_calibration(path: str | Path) -> dict[int, StationCalibratio
     path = Path(path)
     try:
         text = path.read_text(errors="replace")
-    except FileNotFoundError:
-        raise InputError("file not found", path) from None
+    except OSError as exc:
+        raise unreadable(exc, path, "a libsurvive calibration .json") from None
     out: dict[int, StationCalibration] = {}
     for m in re.finditer(r'"lighthouse(\d+)"\s*:\s*\{(.*?)\}', text, re.S):
         body = m.group(2)

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.importers.crazyflie.usdlog import UsdLog
+from lhgraph.io.files import unreadable
 
 Array = NDArray[np.float64]
 
@@ -48,8 +49,8 @@ def read_mocap_npy(path: str | Path) -> Array:
     """The raw ``(N, 4)`` array of a ``mocapNN.npy``; InputError if it is not one."""
     try:
         m = np.load(Path(path), allow_pickle=False)
-    except FileNotFoundError:
-        raise InputError("file not found", path) from None
+    except (FileNotFoundError, NotADirectoryError, IsADirectoryError, PermissionError) as exc:
+        raise unreadable(exc, path, "a numpy .npy array") from None
     except (OSError, ValueError) as exc:
         raise InputError(f"not a numpy .npy array ({exc})", path) from None
     if m.ndim != 2 or m.shape[1] != 4 or len(m) < 2 or not np.all(np.isfinite(m[:, 0])):
