@@ -278,26 +278,53 @@ def test_gyro_scale_and_time_offset_are_solved(miscalibrated_imu):
     assert error["solved"] < 1e-3
 
 
+def test_imu_position_is_solved():
+    # an IMU 5-8 cm from the board origin (the accelerometer reads that point's centripetal
+    # and angular acceleration too): solved with imu_position_sigma_m, its position within
+    # 1 cm per axis and the accelerometer's residuals several times smaller than with the
+    # IMU taken at the origin
+    from lhgraph.estimation.graph.options import GraphOptions
+    from lhgraph.estimation.graph.solver import solve_graph
+    from lhgraph.sim.imu import ImuConfig
+
+    position = np.array([0.05, -0.04, 0.06])
+    config = dataclasses.replace(
+        load_simulation_config("configs/simulation/default.toml"),
+        imu=ImuConfig(position_x_m=position[0], position_y_m=position[1],
+                      position_z_m=position[2]))
+    sim = simulate(config, 1)
+    models = {k: s.model for k, s in sim.truth.stations.items()}
+    as_read = solve_graph(sim.board, sim.angles, models, imu=sim.imu.stream)
+    solved = solve_graph(sim.board, sim.angles, models, GraphOptions(imu_position_sigma_m=0.1),
+                         imu=sim.imu.stream)
+    d = solved.diagnostics
+    found = np.array([d["imu_position_x_m"], d["imu_position_y_m"], d["imu_position_z_m"]])
+    np.testing.assert_allclose(found, position, atol=0.01)
+    assert d["accel_rms_mps2"] < 0.4 * as_read.diagnostics["accel_rms_mps2"]
+
+
 def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
     # the gyro and accelerometer factors' Jacobians with respect to the calibration (scale
-    # error per axis, time offset) against central differences of the evaluator's residuals
+    # error per axis, time offset, IMU rotation and position) and, with the lever arm, the
+    # accelerometer factors' with respect to the states' angular rates, against central
+    # differences of the evaluator's residuals
     from lhgraph.estimation.graph.factors import build_graph
     from lhgraph.estimation.graph.options import GraphOptions
-    from lhgraph.estimation.graph.variables import IMU_CALIBRATION, initial_values
+    from lhgraph.estimation.graph.variables import BOARD_TWIST, IMU_CALIBRATION, initial_values
     from lhgraph.estimation.inertial import initial_gravity
     from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
     from lhgraph.estimation.problem import build_problem
 
     sim = miscalibrated_imu
     options = GraphOptions(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
-                           imu_rotation_sigma_rad=0.1)
+                           imu_rotation_sigma_rad=0.1, imu_position_sigma_m=0.1)
     problem = build_problem(sim.board, sim.angles, {}, 0)
     data = inertial_data(sim.imu.stream, problem.state_time)
     graph, ev = build_graph(problem, options, inertial=data)
     init = PnPKabschInitialiser()(sim.board, sim.angles, problem)
     values = initial_values(ev.layout, init, initial_gravity(data, init.X))
     key = IMU_CALIBRATION.key(0)
-    c0 = np.array([-0.4, 0.1, 0.05, 0.003, 0.02, -0.01, 0.015])
+    c0 = np.array([-0.4, 0.1, 0.05, 0.003, 0.02, -0.01, 0.015, 0.03, -0.05, 0.04])
     values.update(key, c0)
     lin = graph.linearize(values)
     gyro_rows, accel_rows = [], []
@@ -308,12 +335,13 @@ def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
         elif keys[-1] == key and len(keys) > 3:
             accel_rows.append(i)
     assert len(gyro_rows) == int(data.rate_ok.sum()) and len(accel_rows) > 0
-    h = np.array([1e-6, 1e-6, 1e-6, 1e-7, 1e-6, 1e-6, 1e-6])
+    h = np.array([1e-6, 1e-6, 1e-6, 1e-7, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6])
+    dim = IMU_CALIBRATION.dim
     numerical = []
-    for j in range(7):
+    for j in range(dim):
         residuals = []
         for sign in (1, -1):
-            v = gtsam_values_with(values, key, c0 + sign * h[j] * np.eye(7)[j])
+            v = gtsam_values_with(values, key, c0 + sign * h[j] * np.eye(dim)[j])
             ev.evaluate(v)
             residuals.append(ev.inertial_residuals())
         numerical.append([(p - m) / (2 * h[j]) for p, m in zip(*residuals, strict=True)])
@@ -322,9 +350,27 @@ def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
                                (accel_rows, 1, options.accel_sigma_mps2)):
         states = np.flatnonzero(data.rate_ok if which == 0 else data.force_ok)
         for i, k in zip(rows[::25], states[::25], strict=False):
-            A = lin.at(i).getA()[:, -7:] * sigma  # unwhitened
-            num = np.stack([numerical[j][which][k] for j in range(7)], axis=1)
+            A = lin.at(i).getA()[:, -dim:] * sigma  # unwhitened
+            num = np.stack([numerical[j][which][k] for j in range(dim)], axis=1)
             np.testing.assert_allclose(A, num, atol=1e-4 * max(1.0, np.abs(num).max()))
+    # the accelerometer factor over k -> k + 1 by state k's and state k + 1's angular rate
+    # (the twist's first three columns after each pose's six)
+    for i, k in zip(accel_rows[5::40], np.flatnonzero(data.force_ok)[5::40], strict=False):
+        A = lin.at(i).getA() * options.accel_sigma_mps2
+        for state, columns in ((k, slice(6, 9)), (k + 1, slice(18, 21))):
+            twist_key = BOARD_TWIST.key(int(state))
+            w0 = values.atVector(twist_key)
+            num = []
+            for j in range(3):
+                residuals = []
+                for sign in (1, -1):
+                    ev.evaluate(gtsam_values_with(values, twist_key,
+                                                  w0 + sign * 1e-6 * np.eye(6)[j]))
+                    residuals.append(ev.inertial_residuals()[1][k])
+                num.append((residuals[0] - residuals[1]) / 2e-6)
+            num = np.stack(num, axis=1)
+            np.testing.assert_allclose(A[:, columns], num,
+                                       atol=1e-4 * max(1.0, np.abs(num).max()))
 
 
 def gtsam_values_with(values, key, vector):

@@ -9,7 +9,8 @@ Crazyflie 2.1's BMI088 (gyro ~0.1 deg/s, accelerometer ~0.02 m/s^2 per sample, i
 2e-4 rad/s and 2e-3 m/s^2 per root hertz); the biases are drawn with standard deviations
 0.005 rad/s and 0.05 m/s^2 and wander as random walks of 1e-4 rad/s and 1e-3 m/s^2 per
 root second (order-of-magnitude values for such a part; the truth's ``bias`` is the
-stream's mean). No lever arm; a gyro
+stream's mean). The IMU's position in the board frame (``position_*_m``, the lever arm:
+its accelerometer then reads the specific force of that point), a gyro
 scale per axis (``gyro_scale_x``/``_y``/``_z``: the gyro reads that times the rate; the hive
 tracker's reads ~0.48), a stamp delay (``time_offset_s``: a reading of the motion at T
 is stamped T + offset) and a rotation of the IMU's frame (``rotation_x_rad``/``_y``/``_z``)
@@ -44,7 +45,8 @@ class ImuConfig:
     biases (gyro rad/s, accelerometer m/s^2), the gyro's scale per axis, the stamps'
     delay (s: a reading of the motion at T is stamped T + ``time_offset_s``) and the rotation
     vector ``rotation_*_rad`` of the IMU's frame in the board's (the IMU reads ``R^T`` of the
-    board-frame rate and force); the biases wander from their drawn start as random walks
+    board-frame rate and force), its position ``position_*_m`` in the board frame (m); the
+    biases wander from their drawn start as random walks
     of ``*_bias_walk_*`` per square-root second."""
 
     rate_hz: float = option(100.0, gt=0, le=10000)
@@ -59,6 +61,9 @@ class ImuConfig:
     rotation_x_rad: float = option(0.0, ge=-0.5, le=0.5)
     rotation_y_rad: float = option(0.0, ge=-0.5, le=0.5)
     rotation_z_rad: float = option(0.0, ge=-0.5, le=0.5)
+    position_x_m: float = option(0.0, ge=-0.5, le=0.5)
+    position_y_m: float = option(0.0, ge=-0.5, le=0.5)
+    position_z_m: float = option(0.0, ge=-0.5, le=0.5)
     gyro_bias_walk_rad_s_per_sqrt_s: float = option(1e-4, ge=0)
     accel_bias_walk_mps2_per_sqrt_s: float = option(1e-3, ge=0)
 
@@ -86,7 +91,9 @@ def imu_of_motion(motion: Motion, up: ArrayLike, duration_s: float, config: ImuC
     before, now, after = (motion.pose(t + d) for d in (-h, 0.0, h))
     R = now[:, :3, :3]
     rate = so3_log(np.einsum("kji,kjl->kil", before[:, :3, :3], after[:, :3, :3])) / (2 * h)
-    accel = (after[:, :3, 3] - 2 * now[:, :3, 3] + before[:, :3, 3]) / h**2
+    p_board = np.array([config.position_x_m, config.position_y_m, config.position_z_m])
+    at = [T[:, :3, :3] @ p_board + T[:, :3, 3] for T in (before, now, after)]  # the IMU point
+    accel = (at[2] - 2 * at[1] + at[0]) / h**2
     up = np.asarray(up, dtype=float)
     gravity = -STANDARD_GRAVITY_MPS2 * up / np.linalg.norm(up)
     force = np.einsum("kji,kj->ki", R, accel - gravity)

@@ -4,10 +4,12 @@ the graph has IMU factors (:mod:`lhgraph.estimation.inertial`).
 
 Variables read: the IMU bias ``I(0)``, the gravity ``N(0)`` and, when the options ask for it,
 the IMU calibration ``C(0)`` (per-axis gyro scale error ``s``, time offset ``tau``, rotation
-vector ``theta`` of the IMU's frame in the board's, ``R = Exp(theta)``: IMU to board): the
-gyro residual is then ``(1 + s) (R^T omega_k) + b_gyro - gyro(t_k + tau)`` and the
-accelerometer, read at each step's middle ``+ tau``, is ``R`` times its reading in the board
-frame.
+vector ``theta`` of the IMU's frame in the board's, ``R = Exp(theta)``: IMU to board, and the
+IMU's position ``p`` in the board frame): the gyro residual is then
+``(1 + s) (R^T omega_k) + b_gyro - gyro(t_k + tau)`` and the accelerometer, read at each
+step's middle ``+ tau``, is ``R`` times its reading in the board frame less the lever arm's
+``alpha x p + omega x (omega x p)`` (the step's mean angular rate ``omega`` and its angular
+acceleration ``alpha`` from the two states' twists): the specific force at the board origin.
 
 **Preintegrated gyro** (``gyro_preintegration``, off by default): over every step
 k -> k + 1 the gyro's readings between the two states, bias-corrected (and scaled, offset),
@@ -65,11 +67,13 @@ class ImuTerms:
         self.calibration_sigmas = np.array(
             [options.gyro_scale_sigma or FIXED_CALIBRATION_SIGMA] * 3
             + [options.imu_time_offset_sigma_s or FIXED_CALIBRATION_SIGMA]
-            + [options.imu_rotation_sigma_rad or FIXED_CALIBRATION_SIGMA] * 3)
+            + [options.imu_rotation_sigma_rad or FIXED_CALIBRATION_SIGMA] * 3
+            + [options.imu_position_sigma_m or FIXED_CALIBRATION_SIGMA] * 3)
         """Prior spread of the calibration's components (an unasked one is held at 0)."""
         self.imu = np.zeros(9)  # IMU bias (gyro, accelerometer), gravity
-        self.C = np.zeros(7)  # gyro scale error (3), time offset (s), IMU rotation (3)
-        self._R = np.eye(3)  # IMU frame to board frame, Exp(C[4:])
+        self.C = np.zeros(IMU_CALIBRATION.dim)
+        """Gyro scale error (3), time offset (s), IMU rotation (3, rad), IMU position (3, m)."""
+        self._R = np.eye(3)  # IMU frame to board frame, Exp(C[4:7])
         self.preintegrated = (np.zeros(0, dtype=np.int64) if not options.gyro_preintegration
                               else np.flatnonzero(data.rate_ok[:-1] & data.rate_ok[1:]
                                                   & (data.dt > 0)))
@@ -119,10 +123,10 @@ class ImuTerms:
         rate, self._force, self._rate_slope, self._force_slope = d.rate, d.force, None, None
         if self.calibration is not None:
             self.C = values.atVector(self.calibration.key(0))
-            self._R = so3_exp(self.C[4:])
+            self._R = so3_exp(self.C[4:7])
             rate, self._rate_slope, force, self._force_slope = d.read_at(self.C[3])
             self._force_imu = force
-            self._force = force @ self._R.T
+            self._force = force @ self._R.T - self._lever(W)
         self._X, self._W = X, W
         self._u = W[:, :3] @ self._R  # the states' rates in the IMU frame
         self.g = gyro_residuals(np.c_[(1.0 + self.C[:3]) * self._u, W[:, 3:]], self.imu[:3],
@@ -183,23 +187,59 @@ class ImuTerms:
             return
         K = len(self._W)
         scale = np.diag(1.0 + self.C[:3])
-        J_theta = so3_right_jacobian(self.C[4:])
+        J_theta = so3_right_jacobian(self.C[4:7])
         H_twist = np.zeros((K, 3, 6))
         H_twist[:, :, :3] = scale @ self._R.T
         H_gyro_bias = np.zeros((K, 3, 6))
         H_gyro_bias[:, :, :3] = np.eye(3)
-        H_cal = np.zeros((K, 3, 7))
+        H_cal = np.zeros((K, 3, IMU_CALIBRATION.dim))
         H_cal[:, [0, 1, 2], [0, 1, 2]] = self._u
         H_cal[:, :, 3] = -self._rate_slope
         # d (R^T omega) / d theta = [R^T omega]x J_r(theta)
-        H_cal[:, :, 4:] = scale @ skew(self._u) @ J_theta
+        H_cal[:, :, 4:7] = scale @ skew(self._u) @ J_theta
         self.Hg = (H_twist, H_gyro_bias, H_cal)
         R0 = self._X[:-1, :3, :3]
-        H_accel_cal = np.zeros((K - 1, 3, 7))
+        H_accel_cal = np.zeros((K - 1, 3, IMU_CALIBRATION.dim))
         H_accel_cal[:, :, 3] = -np.einsum("kij,jl,kl->ki", R0, self._R, self._force_slope)
         # d (R f) / d theta = -R [f]x J_r(theta)
-        H_accel_cal[:, :, 4:] = R0 @ self._R @ skew(self._force_imu) @ J_theta
+        H_accel_cal[:, :, 4:7] = R0 @ self._R @ skew(self._force_imu) @ J_theta
+        # the residual holds -R0 (f - lever): the lever arm's position and twist terms
+        dL_dp, dL_dw0, dL_dw1 = self._lever_jacobians()
+        H_accel_cal[:, :, 7:] = R0 @ dL_dp
+        self.Ha[1][:, :, :3] += R0 @ dL_dw0
+        self.Ha[3][:, :, :3] += R0 @ dL_dw1
         self.Ha = (*self.Ha, H_accel_cal)
+
+    def _step_rates(self, W: Array) -> tuple[Array, Array]:
+        """Each step's mean angular rate and angular acceleration (K - 1, 3), board frame,
+        from the twists ``W`` of its two states (zero acceleration over a zero-length
+        step)."""
+        dt = self.data.dt[:, None]
+        rise = W[1:, :3] - W[:-1, :3]
+        alpha = np.divide(rise, dt, out=np.zeros_like(rise), where=dt > 0)
+        return 0.5 * (W[:-1, :3] + W[1:, :3]), alpha
+
+    def _lever(self, W: Array) -> Array:
+        """What the accelerometer at the IMU's position ``p`` reads beyond the board origin's
+        specific force over each step, board frame (K - 1, 3): ``alpha x p + omega x (omega
+        x p)``."""
+        omega, alpha = self._step_rates(W)
+        p = self.C[7:]
+        return np.cross(alpha, p) + np.cross(omega, np.cross(omega, p))
+
+    def _lever_jacobians(self) -> tuple[Array, Array, Array]:
+        """Derivatives (K - 1, 3, 3) of :meth:`_lever` by the IMU position and by the two
+        states' angular rates."""
+        omega, alpha = self._step_rates(self._W)
+        p = self.C[7:]
+        dt = self.data.dt[:, None, None]
+        d_p = skew(alpha) + skew(omega) @ skew(omega)
+        # d (omega x (omega x p)) / d omega = (omega . p) I + omega p^T - 2 p omega^T
+        d_omega = (np.einsum("kj,j->k", omega, p)[:, None, None] * np.eye(3)
+                   + np.einsum("ki,j->kij", omega, p) - 2.0 * np.einsum("i,kj->kij", p, omega))
+        # d (alpha x p) / d alpha = -[p]x, alpha = (w1 - w0) / dt
+        d_alpha = np.divide(-skew(p), dt, out=np.zeros((len(dt), 3, 3)), where=dt > 0)
+        return d_p, 0.5 * d_omega - d_alpha, 0.5 * d_omega + d_alpha
 
     def _preintegration_jacobians(self) -> None:
         """``Hp``: the preintegrated factors' Jacobians (pose k, pose k + 1, IMU bias), each
@@ -241,7 +281,9 @@ class ImuTerms:
         calibration = {} if self.calibration is None else {
             "gyro_scale_x": 1.0 + float(self.C[0]), "gyro_scale_y": 1.0 + float(self.C[1]),
             "gyro_scale_z": 1.0 + float(self.C[2]), "imu_time_offset_s": float(self.C[3]),
-            "imu_rotation_deg": float(np.degrees(np.linalg.norm(self.C[4:])))}
+            "imu_rotation_deg": float(np.degrees(np.linalg.norm(self.C[4:7]))),
+            "imu_position_x_m": float(self.C[7]), "imu_position_y_m": float(self.C[8]),
+            "imu_position_z_m": float(self.C[9])}
         if len(self.preintegrated):
             calibration["preintegration_sigma_rad_s"] = self.preintegration_sigma()
         return calibration | {"gyro_bias_rad_s": float(np.linalg.norm(self.imu[:3])),

@@ -96,6 +96,9 @@ class GraphOptions:
     spread (the variable family ``IMU calibration``); 0: not estimated;
     ``imu_rotation_sigma_rad``: likewise the rotation of the IMU's frame in the board's (the
     hive tracker's gyro axes are ~1.5 deg off its light frame);
+    ``imu_position_sigma_m``: likewise the IMU's position in the board frame (m), the lever
+    arm that adds the board's centripetal and angular acceleration to what the accelerometer
+    reads;
     ``diode_bias_sigma_rad``: when positive, every station sees every diode on each axis
     with a constant angle bias of this prior spread (variables of the graph,
     :func:`~lhgraph.estimation.graph.variables.diode_bias_family`: the board's geometry
@@ -149,6 +152,7 @@ class GraphOptions:
     gyro_scale_sigma: float = option(0.0, ge=0)
     imu_time_offset_sigma_s: float = option(0.0, ge=0)
     imu_rotation_sigma_rad: float = option(0.0, ge=0)
+    imu_position_sigma_m: float = option(0.0, ge=0)
     diode_bias_sigma_rad: float = option(0.0, ge=0)
     sensor_offset_sigma_m: float = option(0.0, ge=0)
     rest_keep_every: int = option(1, ge=1)

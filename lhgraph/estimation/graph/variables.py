@@ -82,10 +82,11 @@ IMU_BIAS = VariableFamily("IMU bias", "i", 6, False, "root", 1.0,
 GRAVITY = VariableFamily("gravity", "n", 3, False, "root", 1.0,
                          "gravity vector (m/s^2) in the world")
 IMU_CALIBRATION = VariableFamily(
-    "IMU calibration", "c", 7, False, "root", 1.0,
+    "IMU calibration", "c", 10, False, "root", 1.0,
     "per-axis gyro scale error s (the gyro reads (1 + s) omega + bias), the time offset (s) "
-    "at which the IMU is read on the light's clock (its stamps that much late) and the "
-    "rotation vector (rad) of the IMU's frame in the board's")
+    "at which the IMU is read on the light's clock (its stamps that much late), the "
+    "rotation vector (rad) of the IMU's frame in the board's and the IMU's position (m) in "
+    "the board frame (the accelerometer's lever arm)")
 
 
 DIODE_BIAS = "diode bias"
