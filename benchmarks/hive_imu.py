@@ -15,6 +15,8 @@ solves with the factory calibration of ``hive_evaluation.py`` (gib -1, curve +1)
   IMU-to-light time offset);
 - *IMU, scale, offset and frame solved*: also ``imu_rotation_sigma_rad = 0.1`` (the IMU
   frame's rotation in the tracker's);
+- *IMU, scale, offset, frame and position solved*: also ``imu_position_sigma_m = 0.1`` (the
+  IMU's position in the tracker's frame: the accelerometer's lever arm);
 - the first and the last again with ``gyro_preintegration = true`` (the preintegrated gyro
   factor, its reading noise learned from its residuals: the column says where it ended), the
   last once more with that noise held at the default 0.02 rad/s (``adapt_gyro_sigma =
@@ -65,6 +67,9 @@ VARIANTS = {"light only": (False, GraphOptions()),
             "IMU, scale, offset and frame solved": (True, GraphOptions(
                 gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
                 imu_rotation_sigma_rad=0.1)),
+            "IMU, scale, offset, frame and position solved": (True, GraphOptions(
+                gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
+                imu_rotation_sigma_rad=0.1, imu_position_sigma_m=0.1)),
             "IMU as read, preintegrated gyro": (True, GraphOptions(gyro_preintegration=True)),
             "IMU, scale, offset and frame solved, preintegrated gyro": (True, GraphOptions(
                 gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
@@ -102,9 +107,10 @@ def main() -> int:
              "from the motion start, 4 s apart, each against the whole bag of the same "
              "variant.", "",
              "| variant | path RMSE mm | path RMSE deg | gyro scale x, y, z | IMU time offset "
-             "ms | IMU frame rotation deg | preintegrated gyro noise rad/s | whole-bag solve s "
-             "| LM iterations | slices: station 1 rms mm | slices: rms deg | warnings |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "ms | IMU frame rotation deg | IMU position mm | preintegrated gyro noise rad/s | "
+             "whole-bag solve s | LM iterations | slices: station 1 rms mm | slices: rms deg "
+             "| warnings |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, (with_imu, options) in VARIANTS.items():
         stream = imu if with_imu else None
         tic = time.perf_counter()
@@ -116,6 +122,8 @@ def main() -> int:
                  if "gyro_scale_x" in d else "-")
         offset = f"{d['imu_time_offset_s'] * 1e3:+.1f}" if "imu_time_offset_s" in d else "-"
         turn = f"{d['imu_rotation_deg']:.2f}" if "imu_rotation_deg" in d else "-"
+        position = (", ".join(f"{d[f'imu_position_{a}_m'] * 1e3:+.1f}" for a in "xyz")
+                    if options.imu_position_sigma_m > 0 else "-")
         noise = (f"{d['preintegration_sigma_rad_s']:.4f}" if "preintegration_sigma_rad_s" in d
                  else "-")
         diffs = []
@@ -126,7 +134,8 @@ def main() -> int:
             diffs.append((e.position_norm_m * 1e3, np.degrees(e.rotation_rad)))
         rms = np.sqrt(np.mean(np.square(diffs), axis=0))
         lines.append(f"| {name} | {aligned.rmse_mm():.2f} | {aligned.rmse_deg():.2f} | {scale} "
-                     f"| {offset} | {turn} | {noise} | {seconds:.1f} | {whole.iterations} | "
+                     f"| {offset} | {turn} | {position} | {noise} | {seconds:.1f} | "
+                     f"{whole.iterations} | "
                      f"{rms[0]:.2f} | {rms[1]:.3f} | {len(whole.warnings)} |")
         print(lines[-1], flush=True)
     args.output.write_text("\n".join(lines) + "\n")
