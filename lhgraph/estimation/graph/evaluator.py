@@ -101,6 +101,8 @@ class FactorEvaluator:
         self.motion_factors = range(0)
         """Indices of the motion priors in the graph the callbacks serve (set by
         :func:`~lhgraph.estimation.graph.factors.build_graph`)."""
+        self.accel_factors = range(0)
+        """Indices of the accelerometer factors in that graph (likewise)."""
         self._motion_scale = 1.0  # 1/sqrt(s): the motion prior's covariance is s * Q
         self._bearing_scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
         self._jacobians_ready = False
@@ -146,6 +148,13 @@ class FactorEvaluator:
         point; no-op without them)."""
         if self.preintegrated_gyro() is not None:
             self.imu.scale_preintegration_noise(factor)
+            self._jacobians_ready = False
+
+    def scale_accel_noise(self, factor: float) -> None:
+        """Multiply the accelerometer factors' variance by ``factor`` (at an evaluated point;
+        no-op without IMU factors)."""
+        if self.imu is not None:
+            self.imu.scale_accel_noise(factor)
             self._jacobians_ready = False
 
     def angle_sigma(self) -> float:
@@ -260,7 +269,8 @@ class FactorEvaluator:
     def accel_error(self, k: int) -> FactorError:
         """Callback of the accelerometer factor over the step from state k to k + 1 (keys as
         in :func:`lhgraph.estimation.graph.factors.accel_keys`)."""
-        return self._callback((k, k + 1), k, lambda: self.imu.a, lambda: self.imu.Ha)
+        return self._callback((k, k + 1), k, lambda: self.imu.a_scaled,
+                              lambda: self.imu.Ha_scaled)
 
     def gravity_error(self) -> FactorError:
         """Callback of the gravity-magnitude factor: ``|g| - STANDARD_GRAVITY_MPS2`` (m/s^2); with

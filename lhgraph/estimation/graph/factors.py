@@ -168,10 +168,12 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
                 gyro_noise, [BOARD_TWIST.key(k), IMU_BIAS.key(0), IMU_CALIBRATION.key(0)],
                 ev.gyro_error(k)) if calibrated
                 else gyro_factor(k, inertial.rate[k], options.gyro_sigma_rad_s))
+        first = graph.size()
         for k in np.flatnonzero(inertial.force_ok).tolist():
             accel_noise = gtsam.noiseModel.Isotropic.Sigma(3, ev.imu.accel_sigmas[k])
             graph.add(gtsam.CustomFactor(accel_noise, accel_keys(k, calibrated),
                                          ev.accel_error(k)))
+        ev.accel_factors = range(first, graph.size())
         for i, (k, sigma) in enumerate(zip(ev.imu.preintegrated.tolist(),
                                            ev.imu.preintegration_sigmas.tolist(),
                                            strict=True)):

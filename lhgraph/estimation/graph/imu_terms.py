@@ -61,8 +61,12 @@ class ImuTerms:
     def __init__(self, data: InertialData, layout: VariableLayout, options: GraphOptions):
         self.data = data
         self.gyro_sigma = options.gyro_sigma_rad_s
-        self.accel_sigmas = data.accel_sigmas(options.accel_sigma_mps2)
-        """Each step's accelerometer-factor noise (m/s^2, :meth:`InertialData.accel_sigmas`)."""
+        self.accel_sigmas = data.accel_sigmas(options.accel_start_sigma(data.stream))
+        """Each step's accelerometer-factor noise (m/s^2, :meth:`InertialData.accel_sigmas`) in
+        the graph's noise models; the factors see it times :meth:`accel_sigma_factor`."""
+        self.accel_bounds = (options.min_accel_sigma_mps2, options.accel_sigma_mps2)
+        """The range (m/s^2) a rescaling may move the factors' median noise within."""
+        self._accel_scale = 1.0  # 1/sqrt(f): the accelerometer factors' variance is f times
         self.calibration = layout.family(IMU_CALIBRATION.name)
         self.calibration_sigmas = np.array(
             [options.gyro_scale_sigma or FIXED_CALIBRATION_SIGMA] * 3
@@ -96,6 +100,20 @@ class ImuTerms:
         and Jacobians are scaled instead of their noise models)."""
         self._pre_scale /= np.sqrt(factor)
         self.p_scaled = self.p * self._pre_scale
+
+    def scale_accel_noise(self, factor: float) -> None:
+        """Multiply the accelerometer factors' variance by ``factor`` (their residuals and
+        Jacobians are scaled instead of their noise models)."""
+        self._accel_scale /= np.sqrt(factor)
+        self.a_scaled = self.a * self._accel_scale
+
+    def accel_sigma_factor(self) -> float:
+        """The accelerometer factors' effective noise over their noise models'."""
+        return 1.0 / self._accel_scale
+
+    def accel_sigma(self) -> float:
+        """The accelerometer factors' effective median noise now (m/s^2)."""
+        return float(np.median(self.accel_sigmas[self.data.force_ok]) / self._accel_scale)
 
     def preintegration_sigma(self) -> float:
         """The preintegrated factors' effective reading noise now (rad/s)."""
@@ -132,6 +150,8 @@ class ImuTerms:
         self.g = gyro_residuals(np.c_[(1.0 + self.C[:3]) * self._u, W[:, 3:]], self.imu[:3],
                                 rate)
         self.a = self._accel(False)[0]
+        self.a_scaled = self.a * self._accel_scale
+        """The accelerometer residuals the factors see: ``a`` scaled to the current noise."""
         if len(self.preintegrated):
             self._preintegrate()
 
@@ -176,7 +196,12 @@ class ImuTerms:
         """The residuals the factors see: ``p`` scaled to the current noise."""
 
     def jacobians(self) -> None:
-        """``Hg`` and ``Ha`` at the point of the last :meth:`read`."""
+        """``Hg``, ``Ha`` and ``Ha_scaled`` (the accelerometer factors' at the current noise)
+        at the point of the last :meth:`read`."""
+        self._jacobians()
+        self.Ha_scaled = tuple(H * self._accel_scale for H in self.Ha)
+
+    def _jacobians(self) -> None:
         _, Ha = self._accel(True)
         H_bias = np.zeros((len(Ha[4]), 3, 6))
         H_bias[:, :, 3:] = Ha[4]
@@ -259,7 +284,7 @@ class ImuTerms:
         prior residuals (what the IMU factors add to ``graph.error``)."""
         d = self.data
         g = self.g[d.rate_ok] / self.gyro_sigma
-        a = self.a[d.force_ok] / self.accel_sigmas[d.force_ok, None]
+        a = self.a_scaled[d.force_ok] / self.accel_sigmas[d.force_ok, None]
         m = (np.linalg.norm(self.imu[6:]) - STANDARD_GRAVITY_MPS2) / GRAVITY_SIGMA_MPS2
         c = self.C / self.calibration_sigmas if self.calibration is not None else np.zeros(0)
         p = (self.p_scaled / self.preintegration_sigmas[:, None] if len(self.preintegrated)
@@ -286,7 +311,8 @@ class ImuTerms:
             "imu_position_z_m": float(self.C[9])}
         if len(self.preintegrated):
             calibration["preintegration_sigma_rad_s"] = self.preintegration_sigma()
-        return calibration | {"gyro_bias_rad_s": float(np.linalg.norm(self.imu[:3])),
+        return calibration | {"accel_sigma_mps2": self.accel_sigma(),
+                              "gyro_bias_rad_s": float(np.linalg.norm(self.imu[:3])),
                               "accel_bias_mps2": float(np.linalg.norm(self.imu[3:6])),
                               "gravity_mps2": float(np.linalg.norm(self.imu[6:])),
                               "gyro_rms_rad_s": float(np.sqrt(np.nanmean(gyro**2))),

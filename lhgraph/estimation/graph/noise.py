@@ -40,36 +40,40 @@ update acts only when the ratio leaves (0.8, 1.25) (the redundancy's spread per 
 1 % on a 2 s simulated capture, 0.9 % on a 120 s simulated deck, 8 probes)."""
 
 
-def redundancy(lin: gtsam.GaussianFactorGraph, factors: range, ordering: gtsam.Ordering,
+def redundancy(lin: gtsam.GaussianFactorGraph, groups: list[range], ordering: gtsam.Ordering,
                dims: dict[int, int], probes: int = REDUNDANCY_PROBES, seed: int = 0
-               ) -> tuple[int, float]:
-    """Rows ``n`` and redundancy ``n - trace(H)`` of the linear factors ``factors`` of the
-    whitened least-squares system ``lin`` over variables of dimensions ``dims`` (key: dim;
-    ``H = A_g N^-1 A_g^T`` the factors' block of the hat matrix, ``N = A^T A``): the degrees
-    of freedom the fit leaves their residuals, so that ``e^T e / redundancy`` estimates their
-    variance factor. The trace by Hutchinson's estimator over ``probes`` Rademacher vectors
-    ``z`` (seeded: the same number for the same system): ``z^T A_g N^-1 A_g^T z``, with
-    ``N^-1 = R^-1 R^-T`` from ``lin`` eliminated sequentially in ``ordering``."""
+               ) -> list[tuple[int, float]]:
+    """Per group of linear factors (``groups``: index ranges) of the whitened least-squares
+    system ``lin`` over variables of dimensions ``dims`` (key: dim): its rows ``n`` and
+    redundancy ``n - trace(H)`` (``H = A_g N^-1 A_g^T`` the group's block of the hat matrix,
+    ``N = A^T A``): the degrees of freedom the fit leaves their residuals, so that
+    ``e^T e / redundancy`` estimates their variance factor. The trace by Hutchinson's
+    estimator over ``probes`` Rademacher vectors ``z`` (seeded: the same number for the same
+    system): ``z^T A_g N^-1 A_g^T z``, with ``N^-1 = R^-1 R^-T`` from ``lin`` eliminated
+    sequentially in ``ordering`` (once for every group)."""
     net = lin.eliminateSequential(ordering)
     rng = np.random.default_rng(seed)
-    members = [lin.at(i) for i in factors]
-    rows = np.array([f.rows() for f in members])
-    bounds = np.r_[0, np.cumsum(rows)]
-    b = np.concatenate([f.getb() for f in members]) if members else np.zeros(0)
     zero = {key: np.zeros(dim) for key, dim in dims.items()}
-    traces = []
-    for _ in range(probes):
-        g = gtsam.VectorValues()
-        for key, z_key in zero.items():
-            g.insert(key, z_key)
-        z = rng.choice([-1.0, 1.0], int(bounds[-1]))
-        for f, a, e in zip(members, bounds[:-1], bounds[1:], strict=True):
-            f.transposeMultiplyAdd(1.0, z[a:e], g)
-        u = net.backSubstitute(net.backSubstituteTranspose(g))
-        Au = np.concatenate([f.error_vector(u) for f in members]) + b if members else b
-        traces.append(float(z @ Au))
-    n = int(bounds[-1])
-    return n, n - float(np.mean(traces))
+    out = []
+    for factors in groups:
+        members = [lin.at(i) for i in factors]
+        rows = np.array([f.rows() for f in members])
+        bounds = np.r_[0, np.cumsum(rows)]
+        b = np.concatenate([f.getb() for f in members]) if members else np.zeros(0)
+        traces = []
+        for _ in range(probes):
+            g = gtsam.VectorValues()
+            for key, z_key in zero.items():
+                g.insert(key, z_key)
+            z = rng.choice([-1.0, 1.0], int(bounds[-1]))
+            for f, a, e in zip(members, bounds[:-1], bounds[1:], strict=True):
+                f.transposeMultiplyAdd(1.0, z[a:e], g)
+            u = net.backSubstitute(net.backSubstituteTranspose(g))
+            Au = np.concatenate([f.error_vector(u) for f in members]) + b if members else b
+            traces.append(float(z @ Au))
+        n = int(bounds[-1])
+        out.append((n, n - float(np.mean(traces))))
+    return out
 
 
 class NoiseAdaptation:
@@ -85,12 +89,13 @@ class NoiseAdaptation:
         self.progress = progress
         self.graph = graph
         self.rounds_left = options.motion_prior_rounds
-        self._redundancy: tuple[int, float] | None = None  # at the current noise levels
+        self._redundancy: dict[str, tuple[int, float]] | None = None  # at the current levels
 
     @staticmethod
     def enabled(options: GraphOptions) -> bool:
         """Whether ``options`` adapt any noise level."""
-        return options.adapt_motion_prior or options.adapt_angle_sigma or options.adapt_gyro_sigma
+        return (options.adapt_motion_prior or options.adapt_angle_sigma
+                or options.adapt_gyro_sigma or options.accel_sigma_estimate == "redundancy")
 
     def __call__(self, values: gtsam.Values) -> bool:
         if self.rounds_left <= 0:
@@ -107,10 +112,11 @@ class NoiseAdaptation:
         ev, options = self.evaluator, self.options
         chi2 = ev.motion_chi2_per_dof()
         redundant = options.motion_prior_estimate == "redundancy"
-        if redundant and options.adapt_motion_prior:
-            if self._redundancy is None:
-                self._redundancy = self._motion_redundancy(values)
-            rows, dof = self._redundancy
+        groups = self._redundancy_groups()
+        if groups and self._redundancy is None:
+            self._redundancy = self._redundancies(values, groups)
+        if "motion" in groups:
+            rows, dof = self._redundancy["motion"]
             chi2 *= rows / max(dof, 1.0)
         ratio = float(np.clip(chi2, 1e-3, 1e3))
         if not options.adapt_motion_prior:
@@ -131,17 +137,22 @@ class NoiseAdaptation:
                           / ev.angle_sigma())**2
         imu = ev.preintegrated_gyro()
         gyro = 1.0 if imu is None else self._gyro_ratio(imu)
+        accel = self._accel_ratio() if "accel" in groups else 1.0
         if self.progress:
             self.progress(f"motion prior: chi2/dof {chi2:.3g} (PSD scaled by {ratio:.3g}); "
                           f"angle noise {sigma_hat * 1e6:.1f} urad"
                           + ("" if imu is None else
                              f"; preintegrated gyro noise "
-                             f"{imu.preintegration_sigma() * np.sqrt(gyro):.2g} rad/s"))
-        if 0.8 < ratio < 1.25 and 0.8 < noise < 1.25 and 0.8 < gyro < 1.25:
+                             f"{imu.preintegration_sigma() * np.sqrt(gyro):.2g} rad/s")
+                          + ("" if "accel" not in groups else
+                             f"; accelerometer noise "
+                             f"{ev.imu.accel_sigma() * np.sqrt(accel):.2g} m/s^2"))
+        if all(0.8 < r < 1.25 for r in (ratio, noise, gyro, accel)):
             return False
         ev.scale_motion_prior(ratio)
         ev.scale_bearing_noise(noise)
         ev.scale_preintegration_noise(gyro)
+        ev.scale_accel_noise(accel)
         self._redundancy = None
         return True
 
@@ -155,8 +166,34 @@ class NoiseAdaptation:
         return float(np.clip(imu.preintegration_chi2_per_dof(), (imu.reading_sigma / now) ** 2,
                              (self.options.gyro_sigma_rad_s / now) ** 2))
 
-    def _motion_redundancy(self, values: gtsam.Values) -> tuple[int, float]:
-        """The motion prior's rows and redundancy at ``values`` (:func:`redundancy`)."""
+    def _accel_ratio(self) -> float:
+        """The variance factor of the accelerometer factors: their whitened chi2 over their
+        redundancy, within what keeps their median noise in the options' bounds."""
+        imu = self.evaluator.imu
+        rows, dof = self._redundancy["accel"]
+        ok = imu.data.force_ok
+        chi2 = float(np.sum((imu.a_scaled[ok] / imu.accel_sigmas[ok, None]) ** 2))
+        low, high = imu.accel_bounds
+        now = imu.accel_sigma()
+        return float(np.clip(chi2 / max(dof, 1.0), (low / now) ** 2, (high / now) ** 2))
+
+    def _redundancy_groups(self) -> dict[str, range]:
+        """The factor groups whose variance factors count over their redundancy: the motion
+        prior (``motion_prior_estimate = "redundancy"``) and the accelerometer factors
+        (``accel_sigma_estimate = "redundancy"``, with IMU factors)."""
+        ev, options = self.evaluator, self.options
+        groups = {}
+        if options.motion_prior_estimate == "redundancy" and options.adapt_motion_prior:
+            groups["motion"] = ev.motion_factors
+        if (options.accel_sigma_estimate == "redundancy" and ev.imu is not None
+                and len(ev.accel_factors)):
+            groups["accel"] = ev.accel_factors
+        return groups
+
+    def _redundancies(self, values: gtsam.Values, groups: dict[str, range]
+                      ) -> dict[str, tuple[int, float]]:
+        """Rows and redundancy of each of ``groups`` at ``values`` (:func:`redundancy`)."""
         lin = self.graph.linearize(values)
-        return redundancy(lin, self.evaluator.motion_factors,
-                          self.evaluator.layout.elimination_ordering(), values.dims())
+        found = redundancy(lin, list(groups.values()),
+                           self.evaluator.layout.elimination_ordering(), values.dims())
+        return dict(zip(groups, found, strict=True))

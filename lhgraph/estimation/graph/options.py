@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -14,6 +14,7 @@ LOSSES = ("cauchy", "huber")
 SOLVERS = ("lm", "isam2")
 SWEEP_TIMES = ("auto", "stamped")
 PRIOR_ESTIMATES = ("auto", "chi2", "redundancy")
+ACCEL_ESTIMATES = ("stream", "redundancy")
 
 
 @dataclass(frozen=True)
@@ -76,7 +77,11 @@ class GraphOptions:
     ``imu_max_gap_s`` of a state; ``adapt_accel_sigma``: the accelerometer factors' noise
     is instead :func:`~lhgraph.estimation.inertial.accel_factor_sigma` of the stream (its
     readings' own noise, vibration included), between ``min_accel_sigma_mps2`` and
-    ``accel_sigma_mps2`` (the ceiling); ``gyro_preintegration``: also a factor per step on the
+    ``accel_sigma_mps2`` (the ceiling); ``accel_sigma_estimate``: ``"redundancy"`` (the
+    default): from there the variance-component updates rescale the accelerometer factors'
+    noise to their chi2 over their redundancy (the degrees of freedom the fit leaves them, as
+    for the motion prior), within the same bounds; ``"stream"``: it stays where the stream
+    put it; ``gyro_preintegration``: also a factor per step on the
     rotation the gyro's readings between the two states integrate to
     (:mod:`lhgraph.estimation.graph.imu_terms`; off by default: on the real Crazyflie log the
     deck's hit times and IMU stamps disagree by milliseconds at turns of ~1 rad/s, far above
@@ -145,6 +150,7 @@ class GraphOptions:
     accel_sigma_mps2: float = option(0.5, gt=0)
     adapt_accel_sigma: bool = option(True)
     min_accel_sigma_mps2: float = option(0.02, gt=0)
+    accel_sigma_estimate: str = option("redundancy", choices=ACCEL_ESTIMATES)
     imu_max_gap_s: float = option(0.05, gt=0)
     gyro_preintegration: bool = option(False)
     adapt_gyro_sigma: bool = option(True)
@@ -160,12 +166,12 @@ class GraphOptions:
     def __post_init__(self) -> None:
         check_fields(self)
 
-    def for_imu(self, imu: ImuStream) -> GraphOptions:
-        """These options with the accelerometer noise of ``imu`` when ``adapt_accel_sigma``
-        (:func:`~lhgraph.estimation.inertial.accel_factor_sigma`, clipped to
-        [``min_accel_sigma_mps2``, ``accel_sigma_mps2``]; the ceiling wins)."""
+    def accel_start_sigma(self, imu: ImuStream) -> float:
+        """The accelerometer factors' noise (m/s^2) to start from with the stream ``imu``:
+        with ``adapt_accel_sigma`` its :func:`~lhgraph.estimation.inertial.accel_factor_sigma`
+        clipped to [``min_accel_sigma_mps2``, ``accel_sigma_mps2``] (the ceiling wins), else
+        ``accel_sigma_mps2``."""
         if not self.adapt_accel_sigma:
-            return self
-        sigma = float(np.clip(accel_factor_sigma(imu), self.min_accel_sigma_mps2,
-                              self.accel_sigma_mps2))
-        return replace(self, accel_sigma_mps2=sigma)
+            return self.accel_sigma_mps2
+        return float(np.clip(accel_factor_sigma(imu), self.min_accel_sigma_mps2,
+                             self.accel_sigma_mps2))

@@ -105,7 +105,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     fit, ev, cov = _optimise(problem, prior_estimate(options, few, False), init, progress)
     notes = []
     if imu is not None:
-        options = prior_estimate(options.for_imu(imu), few, True)
+        options = prior_estimate(options, few, True)
         inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
         refined = Initialisation(ev.station_poses().copy(), ev.board_poses().copy(),
                                  ev.board_twists().copy())

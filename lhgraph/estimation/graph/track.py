@@ -253,7 +253,6 @@ def track(board: Board, angles: Angles, stations: Stations,
         init, n_pnp = initial_path(board, angles, problem, T_world_lh, pose_solver)
     inertial = gravity = None
     if imu is not None:
-        options = options.for_imu(imu)
         inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
         init, gravity = start_with_imu(init, inertial)
     timings = {"initialise": time.perf_counter() - t0}
