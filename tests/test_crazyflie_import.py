@@ -175,6 +175,29 @@ def test_import_synthetic_writes_contract_files(tmp_path, capsys):
     assert "exists already" in capsys.readouterr().err
 
 
+def test_invalid_hits_and_imu_samples_are_dropped_and_counted(tmp_path, capsys):
+    # hits the angles CSV cannot hold (an angle beyond pi, sweep 7, a sensor not on the deck)
+    # and IMU samples it cannot (a NaN, a repeated stamp) are left out and counted; the
+    # written files read back
+    from lhgraph.io.imu import load_imu
+
+    log = synthetic_log()
+    ang, imu = log.events["lhAngle"], log.events["fixedFrequency"]
+    ang["angle"][3], ang["sweep"][10], ang["sensor"][20] = 100.0, 7, 9
+    imu["acc.x"][5] = np.nan
+    imu["timestamp"][50] = imu["timestamp"][49]
+    write_usd_log(log, tmp_path / "log01")
+    out = tmp_path / "out"
+    assert main(["import", "crazyflie", str(tmp_path / "log01"), "-o", str(out)]) == 0
+    summary = capsys.readouterr().out
+    assert "dropped invalid hits (an angle not finite or beyond pi, a sweep not 0 or 1, a " \
+           "sensor not on the deck): 3" in summary
+    assert "dropped 2 samples" in summary
+    a = load_angles(out / "angles.csv")  # the reader's own checks: the angles are valid
+    assert set(a.sensor.tolist()) <= {0, 1, 2, 3} and len(a) < 960
+    assert len(load_imu(out / "imu.csv").time) == 200 - 2
+
+
 def test_lh2_log_is_imported_as_lh2(tmp_path, capsys):
     write_usd_log(synthetic_log(period_s=1 / 50), tmp_path / "log00")
     r = import_crazyflie(tmp_path / "log00", tmp_path / "o")

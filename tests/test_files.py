@@ -305,3 +305,22 @@ def test_unreadable_inputs_name_the_file_and_the_reason(tmp_path):
         read_toml(tmp_path)
     assert main(["import", "crazyflie", str(a_file), "--system-config", str(under),
                  "--output", str(tmp_path / "out")]) == 2
+
+
+def test_out_of_range_integers_and_degenerate_boards_are_refused(tmp_path):
+    # an integer beyond 2^53 in a CSV (quoted or not) or a TOML, a board whose sensors all sit
+    # at one point or 1e308 m away: one line naming the file and the place
+    header = "time,lighthouse,axis,sensor,angle\n"
+    for row in ('0.1,0,1,99999999999999999999999,0.1\n',
+                '0.1,0,1,"99999999999999999999999",0.1\n'):
+        with pytest.raises(InputError, match=r"big\.csv:2: column 'sensor': .* out of range"):
+            load_angles(_write(tmp_path, "big.csv", header + row))
+    sensor = "[[sensors]]\nid = {id}\nposition = {p}\nnormal = [0.0, 0.0, 1.0]\n"
+    cases = {"id": (sensor.format(id=2**63, p="[0.0, 0.0, 0.0]"), "out of range"),
+             "point": (sensor.format(id=0, p="[0.0, 0.0, 0.0]")
+                       + sensor.format(id=1, p="[0.0, 0.0, 0.0]"), "span less than 1 mm"),
+             "far": (sensor.format(id=0, p="[1e308, 0.0, 0.0]")
+                     + sensor.format(id=1, p="[0.0, 0.0, 0.0]"), "more than 10 m")}
+    for name, (text, message) in cases.items():
+        with pytest.raises(InputError, match=rf"{name}\.toml:sensors.*{message}"):
+            load_board(_write(tmp_path, f"{name}.toml", text))

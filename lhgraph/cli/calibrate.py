@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from lhgraph.cli.common import COMMANDS, add_common_output, add_verbose, progress_printer
+from lhgraph.cli.common import (
+    COMMANDS,
+    add_common_output,
+    add_verbose,
+    at_least,
+    progress_printer,
+)
 
 # --- simulate ---
 
@@ -16,7 +22,8 @@ def add_simulate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        "write angles.csv, board.toml, truth.toml and trajectory.csv.")
     p.add_argument("config", nargs="?", help="simulation TOML (default: the bundled default)")
     p.add_argument("--output", "-o", required=True, help="output directory")
-    p.add_argument("--seed", type=int, help="random seed (overrides the config's seed)")
+    p.add_argument("--seed", type=at_least(0, int),
+                   help="random seed >= 0 (overrides the config's seed)")
     p.add_argument("--capture", action="store_true",
                    help="also write the raw signal a board would record (capture.lhcap)")
     add_common_output(p)
@@ -145,7 +152,8 @@ def add_study(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        "Table III comparison and plots (docs/workflow.md).")
     p.add_argument("config", help="study TOML (e.g. configs/study_small.toml)")
     p.add_argument("--output", "-o", required=True, help="study directory")
-    p.add_argument("--jobs", "-j", type=int, default=1, help="parallel processes (default 1)")
+    p.add_argument("--jobs", "-j", type=at_least(1, int), default=1,
+                   help="parallel processes (default 1)")
     p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of "
                    "local processes (needs lhgraph[dask])")
     p.add_argument("--force", action="store_true",

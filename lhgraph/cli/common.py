@@ -8,6 +8,7 @@ order of ``lhgraph --help``).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Callable
 
@@ -15,6 +16,24 @@ Runner = Callable[[argparse.Namespace], int]
 Adder = Callable[[argparse._SubParsersAction], argparse.ArgumentParser]
 
 COMMANDS: list[tuple[str, Adder, Runner]] = []
+
+
+def at_least(low: float, kind: type = float, strict: bool = False
+             ) -> Callable[[str], float]:
+    """An argparse ``type``: a finite ``kind`` (int or float) of at least ``low`` (above it
+    when ``strict``), else argparse's one-line error (exit 2)."""
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            what = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not math.isfinite(value) or value < low or (strict and value == low):
+            raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {low:g}, "
+                                             f"got {text}")
+        return value
+
+    return parse
 
 
 def add_common_output(p: argparse.ArgumentParser) -> None:

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from lhgraph.choices import FORMATS, PERIODS, SYNCS
-from lhgraph.cli.common import COMMANDS, add_common_output
+from lhgraph.cli.common import COMMANDS, add_common_output, at_least
 
 # --- decode ---
 
@@ -22,7 +22,8 @@ def add_decode(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="input format (docs/decoding.md; default: from the file name)")
     p.add_argument("--device", help="libsurvive device name (e.g. HMD)")
     p.add_argument("--board", help="board TOML: drop pulses of sensors not on it")
-    p.add_argument("--sample-rate", type=float, help="raw dump sample rate in Hz (2e6)")
+    p.add_argument("--sample-rate", type=at_least(0, float, strict=True),
+                   help="raw dump sample rate in Hz (2e6)")
     p.add_argument("--period", choices=PERIODS,
                    help="rotor period: fitted to the sync train or 1/60 s (default: fit; "
                    "nominal for libsurvive recordings)")

@@ -23,6 +23,9 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 
+INT_EXACT = 2**53
+"""Integers in the contract files (ids, indices, counts) stay below this magnitude: exact as
+a float, and far inside 64 bits."""
 CSV_ENCODING = "utf-8-sig"
 """CSV files are UTF-8; a leading byte-order mark (as some spreadsheet programs write) is
 skipped."""
@@ -147,9 +150,11 @@ def get_key(table: dict[str, Any], key: str, source: str | Path, where: str) -> 
 
 
 def as_int(value: Any, source: str | Path, where: str) -> int:
-    """An integer value (bools are refused)."""
+    """An integer value (bools are refused) of magnitude below ``INT_EXACT``."""
     if isinstance(value, bool) or not isinstance(value, int):
         raise InputError(f"expected an integer, got {value!r}", source, where)
+    if not -INT_EXACT < value < INT_EXACT:
+        raise InputError(f"{value} is out of range", source, where)
     return value
 
 
@@ -246,7 +251,9 @@ def read_csv_columns(
     types = dict(columns)
     if fast is not None:
         wanted = [(j, name) for j, name in enumerate(header) if name in types or name in optional]
-        if all(types.get(name, float) is float or np.array_equal(fast[:, j], np.round(fast[:, j]))
+        if all(types.get(name, float) is float
+               or (np.array_equal(fast[:, j], np.round(fast[:, j]))
+                   and np.all(np.abs(fast[:, j]) < INT_EXACT))
                for j, name in wanted):
             return {name: fast[:, j].astype(np.int64) if types.get(name, float) is int
                     else fast[:, j] for j, name in wanted}
@@ -272,6 +279,8 @@ def read_csv_columns(
                                  line) from None
             if kind is float and not math.isfinite(value):
                 raise InputError(f"column '{name}': value is {text}", path, line)
+            if kind is int and not -INT_EXACT < value < INT_EXACT:
+                raise InputError(f"column '{name}': {text} is out of range", path, line)
             values[i] = value
         out[name] = values
     return out

@@ -42,6 +42,12 @@ class Board:
         return bool(np.linalg.svd(centred, compute_uv=False)[-1] < tol_m * np.sqrt(len(centred)))
 
 
+MAX_EXTENT_M = 10.0
+"""A board file's sensors lie within this distance of its origin on every axis (m)."""
+MIN_SPAN_M = 1e-3
+"""A board file's sensors span at least this much on some axis (m)."""
+
+
 def make_board(positions: ArrayLike, normals: ArrayLike, ids: ArrayLike | None = None,
                name: str = "") -> Board:
     """Board from arrays; normals are normalised, ids default to 0..N-1."""
@@ -79,6 +85,13 @@ def load_board(path: str | Path) -> Board:
         nrm.append(n)
     if len(set(ids)) != len(ids):
         raise InputError("duplicate sensor id", path, "sensors")
+    far = [i for i, p in enumerate(pos) if np.max(np.abs(p)) > MAX_EXTENT_M]
+    if far:
+        raise InputError(f"position more than {MAX_EXTENT_M:g} m from the board origin", path,
+                         f"sensors[{far[0]}].position")
+    if len(pos) > 1 and np.ptp(np.array(pos), axis=0).max() < MIN_SPAN_M:
+        raise InputError(f"the sensors' positions span less than {MIN_SPAN_M * 1e3:g} mm: "
+                         "not a board a pose can be solved from", path, "sensors")
     return make_board(pos, nrm, ids, name=str(data.get("name", Path(path).stem)))
 
 

@@ -220,6 +220,8 @@ def parse_simulation_config(data: dict[str, Any], source: str | Path,
         raise InputError(f"expected a board name or path, got {board!r}", source, "board")
     board_by_name(board, base_dir, source, "board")
     seed = as_int(top.get("seed", d.seed), source, "seed")
+    if seed < 0:
+        raise InputError(f"must be >= 0, got {seed}", source, "seed")
 
     stations = None
     if "stations" in data:

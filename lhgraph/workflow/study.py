@@ -229,6 +229,16 @@ def case_key(config: SimulationConfig, method: str, graph: GraphOptions,
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def stored_result(path: Path) -> dict | None:
+    """A stored result of a study directory, or None (to be run again) when it is not one:
+    unreadable, not JSON or not a JSON object."""
+    try:
+        stored = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return stored if isinstance(stored, dict) else None
+
+
 def run_study(study: StudyConfig, out_dir: str | Path, jobs: int = 1,
               scheduler: str | None = None, rerun: bool = False,
               progress: Callable[[str], None] | None = None) -> StudyResult:
@@ -252,7 +262,7 @@ def run_study(study: StudyConfig, out_dir: str | Path, jobs: int = 1,
         for method in study.methods:
             key = case_key(config, method, study.graph, study.paper)
             path = result_file(out_dir, name, method)
-            stored = json.loads(path.read_text()) if path.exists() and not rerun else None
+            stored = stored_result(path) if path.exists() and not rerun else None
             if stored is not None and stored.get("key") == key:
                 records.append(stored)
             else:
@@ -269,8 +279,9 @@ def run_study(study: StudyConfig, out_dir: str | Path, jobs: int = 1,
                              "pip install 'lhgraph[dask]'") from None
         try:
             client = Client(scheduler, timeout=10)
-        except OSError as exc:
-            raise InputError(f"cannot reach the Dask scheduler {scheduler} ({exc})") from None
+        except (OSError, ValueError) as exc:  # ValueError: not an address
+            raise InputError(f"cannot reach the Dask scheduler {scheduler} ({exc})",
+                             where="--scheduler") from None
         backend = {"backend": "dask", "n_jobs": -1}
     try:
         with parallel_config(**backend):

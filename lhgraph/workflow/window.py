@@ -60,9 +60,14 @@ def moving_window(angles: Angles, duration_s: float, threshold_rad_s: float = 0.
     """The hits of the first ``duration_s`` seconds (times in s) from the moment the board
     starts moving (:func:`motion_start`), times unchanged.
 
-    Raises :class:`InputError` for a non-positive duration or a board that never moves.
+    Raises :class:`InputError` for a non-positive duration, a board that never moves or a
+    window without hits.
     """
     if not duration_s > 0:
         raise InputError(f"duration must be > 0 s, got {duration_s:g}", where="--duration")
     t_start = motion_start(angles, threshold_rad_s, min_moving_s, bin_s, max_gap_s)
-    return angles.select((angles.time >= t_start) & (angles.time < t_start + duration_s))
+    keep = (angles.time >= t_start) & (angles.time < t_start + duration_s)
+    if not keep.any():
+        raise InputError(f"no hit within {duration_s:g} s of the motion's start "
+                         f"(t = {t_start:.3f} s)", where="--duration")
+    return angles.select(keep)

@@ -38,6 +38,9 @@ from lhgraph.model.calibration import save_calibration
 from lhgraph.model.station import StationModel
 
 IMU_VARIABLES = ("acc.x", "acc.y", "acc.z", "gyro.x", "gyro.y", "gyro.z")
+MIN_IMU_SAMPLES = 3
+"""Fewer valid IMU samples than this (what an IMU stream needs) and no ``imu.csv`` is written."""
+ANGLE_VARIABLES = ("basestation", "sweep", "sensor", "angle", "correctedAngle")
 
 
 @dataclass(frozen=True)
@@ -53,6 +56,7 @@ class CrazyflieImport:
     system_type: int = 1
     mocap: Mocap | None = None
     skipped: tuple[str, ...] = field(default=())
+    imu_dropped: int = 0
 
     def summary(self) -> str:
         """Human-readable lines."""
@@ -60,13 +64,30 @@ class CrazyflieImport:
                  f"duration {self.duration_s:.1f} s"]
         lines += [f"log: {n}" for n in self.notes]
         lines += self.sweeps.lines()
-        lines.append(f"imu: {self.imu_rate_hz:.1f} Hz")
+        lines.append(f"imu: {self.imu_rate_hz:.1f} Hz; dropped {self.imu_dropped} samples "
+                     "(a value not finite, or a stamp not after the one before)")
         if self.mocap is not None:
             lines.append(f"mocap: {len(self.mocap.time)} samples on the log clock (clock rate "
                          f"{self.mocap.rate:.6f}), {self.mocap.n_unseen} unseen left out")
         lines += [f"not written: {s}" for s in self.skipped]
         lines += [f"wrote {p}" for p in self.paths.values()]
         return "\n".join(lines)
+
+
+def imu_stream(log: UsdLog, source: str | Path) -> tuple[ImuStream, int]:
+    """The log's ``fixedFrequency`` events as an IMU stream in SI units (the log's
+    accelerometer is in g, its gyro in deg/s) and how many samples were dropped: a value not
+    finite, or a stamp not after the last one kept."""
+    if not log.count("fixedFrequency"):
+        return ImuStream(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))), 0
+    log.require("fixedFrequency", IMU_VARIABLES, source)
+    ff, t = log.events["fixedFrequency"], log.time_s("fixedFrequency")
+    accel = np.stack([ff[f"acc.{k}"].astype(float) for k in "xyz"], axis=1)
+    gyro = np.stack([ff[f"gyro.{k}"].astype(float) for k in "xyz"], axis=1)
+    keep = np.isfinite(accel).all(axis=1) & np.isfinite(gyro).all(axis=1) & np.isfinite(t)
+    keep &= t > np.r_[-np.inf, np.maximum.accumulate(np.where(keep, t, -np.inf))[:-1]]
+    stream = ImuStream(t[keep], accel[keep] * STANDARD_GRAVITY_MPS2, np.radians(gyro[keep]))
+    return stream, int(np.sum(~keep))
 
 
 def default_mocap_path(log_path: str | Path) -> Path | None:
@@ -82,6 +103,7 @@ def system_type(log: UsdLog, source: str | Path) -> int:
     33.3 ms; LH2: every rotor turn, 18.5-20 ms); InputError without angles."""
     if log.count("lhAngle") == 0:
         raise InputError("no lhAngle events in the log", source)
+    log.require("lhAngle", ANGLE_VARIABLES, source)
     return 2 if sweep_interval_s(log) < LH2_MAX_INTERVAL_S else 1
 
 
@@ -118,29 +140,30 @@ def import_crazyflie(log_path: str | Path, out_dir: str | Path,
         raise InputError(f"the system configuration is {SYSTEM_TYPES[config.system_type]} "
                          f"(systemType {config.system_type}) but the log holds "
                          f"{SYSTEM_TYPES[generation]} sweeps", system_config)
+    for key, found in (("geos", config and config.T_world_lh),
+                       ("calibs", config and config.calibrations)):
+        if config is not None and not found:
+            raise InputError(f"no '{key}' in the system configuration: the importer writes "
+                             "cfclient's geometry and calibration from it", system_config)
     for p in paths.values():
         check_writable(p, overwrite)
     aligned = None
     if mocap is not None:
         aligned = align_mocap(read_mocap_npy(mocap), *marker_events_s(log, log_path))
     angles, sweeps = lh2_angles(log) if generation == 2 else lh1_angles(log)
+    if len(angles) == 0:
+        raise InputError(f"no valid lhAngle hit in the log ({sweeps.lines()[-1]})", log_path)
     save_angles(angles, paths["angles"], overwrite)
     save_board(crazyflie_deck(), paths["board"], overwrite)
     imu_rate = 0.0
-    if log.count("fixedFrequency"):
-        ff, t_imu = log.events["fixedFrequency"], log.time_s("fixedFrequency")
-        missing = [v for v in IMU_VARIABLES if v not in ff.dtype.names]
-        if missing:
-            raise InputError(f"fixedFrequency events lack {', '.join(missing)}", log_path)
-        # the log's accelerometer is in g, its gyro in deg/s
-        accel = np.stack([ff[f"acc.{k}"].astype(float) for k in "xyz"], axis=1)
-        gyro = np.stack([ff[f"gyro.{k}"].astype(float) for k in "xyz"], axis=1)
-        save_imu(ImuStream(t_imu, accel * STANDARD_GRAVITY_MPS2, np.radians(gyro)),
-                 paths["imu"], overwrite)
-        imu_rate = (len(t_imu) - 1) / (t_imu[-1] - t_imu[0]) if len(t_imu) > 1 else 0.0
+    skipped = []
+    stream, imu_dropped = imu_stream(log, log_path)
+    if len(stream.time) >= MIN_IMU_SAMPLES:
+        save_imu(stream, paths["imu"], overwrite)
+        imu_rate = (len(stream.time) - 1) / (stream.time[-1] - stream.time[0])
     else:
-        save_imu(ImuStream(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))), paths["imu"],
-                 overwrite)
+        skipped.append(f"imu.csv ({len(stream.time)} valid fixedFrequency samples)")
+        del paths["imu"]
     if config is not None:
         save_calibration(config.calibrations, paths["ootx"], overwrite)
         save_stations(_stations(config), paths["stations-cfclient"], overwrite)
@@ -149,11 +172,10 @@ def import_crazyflie(log_path: str | Path, out_dir: str | Path,
                                            "y": aligned.position[:, 1],
                                            "z": aligned.position[:, 2]},
                           {"time": "{:.6f}"}, overwrite)
-    skipped = []
     if config is None:
         skipped.append("ootx.toml, stations-cfclient.toml (no --system-config)")
     if mocap is None:
         skipped.append("mocap.csv (no mocapNN.npy beside the log, no --mocap)")
     return CrazyflieImport(paths, log.version, log.notes, sweeps,
                            float(angles.time[-1] - angles.time[0]) if len(angles) else 0.0,
-                           float(imu_rate), generation, aligned, tuple(skipped))
+                           float(imu_rate), generation, aligned, tuple(skipped), imu_dropped)

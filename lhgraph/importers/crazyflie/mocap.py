@@ -37,6 +37,7 @@ def marker_events_s(log: UsdLog, source: str | Path | None = None) -> tuple[floa
     """Log times (s) of the markers' on (mode 1) and off (mode 0) events."""
     if log.count("activeMarkerModeChanged") == 0:
         raise InputError("no activeMarkerModeChanged events: cannot align the mocap", source)
+    log.require("activeMarkerModeChanged", ("mode",), source)
     mode = log.events["activeMarkerModeChanged"]["mode"]
     t = log.time_s("activeMarkerModeChanged")
     on, off = t[mode == 1], t[mode == 0]
@@ -53,8 +54,14 @@ def read_mocap_npy(path: str | Path) -> Array:
         raise unreadable(exc, path, "a numpy .npy array") from None
     except (OSError, ValueError) as exc:
         raise InputError(f"not a numpy .npy array ({exc})", path) from None
+    if not isinstance(m, np.ndarray):  # an .npz archive
+        raise InputError("not a numpy .npy array (an .npz archive?)", path)
     if m.ndim != 2 or m.shape[1] != 4 or len(m) < 2 or not np.all(np.isfinite(m[:, 0])):
         raise InputError(f"expected an (N, 4) array of time (ms), x, y, z; got {m.shape}", path)
+    if not np.all(np.diff(m[:, 0]) > 0):
+        row = int(np.flatnonzero(np.diff(m[:, 0]) <= 0)[0]) + 1
+        raise InputError(f"times (column 0) must increase: row {row} is not after row {row - 1}",
+                         path)
     return m.astype(float)
 
 

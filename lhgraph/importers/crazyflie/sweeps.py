@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from lhgraph.importers.crazyflie.usdlog import UsdLog
 from lhgraph.io.angles import Angles
+from lhgraph.model.boards import crazyflie_deck
 
 Array = NDArray[np.float64]
 
@@ -45,11 +46,11 @@ BURST_GAP_S = 1e-3
 @dataclass(frozen=True)
 class SweepSummary:
     """What :func:`lh1_angles` kept and dropped: per station, hits kept, exact repeats
-    dropped, non-finite angles dropped."""
+    dropped, invalid hits dropped (:func:`valid_hits`)."""
 
     kept: dict[int, int]
     repeats: dict[int, int]
-    non_finite: int
+    invalid: int
 
     def lines(self) -> list[str]:
         """Human-readable lines for the import summary."""
@@ -58,7 +59,8 @@ class SweepSummary:
             "hits kept: " + ", ".join(f"station {s}: {self.kept.get(s, 0)}" for s in st),
             "dropped repeated hits (an earlier pair logged again, bit-identical): "
             + ", ".join(f"station {s}: {self.repeats.get(s, 0)}" for s in st),
-            f"dropped non-finite angles: {self.non_finite}",
+            f"dropped invalid hits (an angle not finite or beyond pi, a sweep not 0 or 1, a "
+            f"sensor not on the deck): {self.invalid}",
         ]
 
 
@@ -93,22 +95,32 @@ def sweep_interval_s(log: UsdLog) -> float:
     return float(np.median(dt)) if len(dt) else float("nan")
 
 
-def _summary(a: NDArray, station: NDArray, repeat: NDArray, finite: NDArray) -> SweepSummary:
+def valid_hits(a: NDArray) -> NDArray[np.bool_]:
+    """Per ``lhAngle`` event: both angles finite and within [-pi, pi] (rad), the sweep 0 or
+    1 and the sensor one of the deck's four."""
+    ok = np.ones(len(a), dtype=bool)
+    for name in ("angle", "correctedAngle"):
+        value = a[name].astype(float)
+        ok &= np.isfinite(value) & (np.abs(value) <= np.pi)
+    return ok & np.isin(a["sweep"], (0, 1)) & np.isin(a["sensor"], crazyflie_deck().ids)
+
+
+def _summary(a: NDArray, station: NDArray, repeat: NDArray, valid: NDArray) -> SweepSummary:
     stations = np.unique(a["basestation"]).astype(int)
     kept = {int(s): int(np.sum(station == s)) for s in stations}
     repeats = {int(s): int(np.sum(repeat & (a["basestation"] == s))) for s in stations}
-    return SweepSummary(kept, repeats, int(np.sum(~finite & ~repeat)))
+    return SweepSummary(kept, repeats, int(np.sum(~valid & ~repeat)))
 
 
 def lh1_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
     """The angles table of an LH1 log: station = the log's base-station index, axis = its
     sweep (0 horizontal = azimuth, 1 vertical = elevation), ``angle`` as measured; extra
     columns ``corrected_angle`` (the firmware's) and ``log_time`` (s, the event's stamp).
-    Repeats and non-finite angles are dropped and counted."""
+    Repeats and invalid hits (:func:`valid_hits`) are dropped and counted."""
     a, t = _angle_events(log)
     repeat = repeated_hits(log)
-    finite = np.isfinite(a["angle"]) & np.isfinite(a["correctedAngle"])
-    keep = ~repeat & finite
+    valid = valid_hits(a)
+    keep = ~repeat & valid
     k = a[keep]
     axis = k["sweep"].astype(np.int64)
     angle = k["angle"].astype(float)
@@ -120,7 +132,7 @@ def lh1_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
                     angle[order],
                     {"corrected_angle": k["correctedAngle"].astype(float)[order],
                      "log_time": t[keep][order]})
-    return angles, _summary(a, station, repeat, finite)
+    return angles, _summary(a, station, repeat, valid)
 
 
 def lh2_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
@@ -128,7 +140,8 @@ def lh2_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
     sweep (0 = the first light plane, tilted -30°; 1 = the second, +30°), ``angle`` as
     measured; extra columns ``corrected_angle`` and ``log_time`` as :func:`lh1_angles`.
     Repeats (a station's last measurement logged again with another station's: measured on
-    the real log, docs/crazyflie.md) and non-finite angles are dropped and counted.
+    the real log, docs/crazyflie.md) and invalid hits (:func:`valid_hits`) are dropped and
+    counted.
 
     Hit time: the deck logs a diode's two planes when the second has passed; within one
     revolution of period ``T`` (each station's median spacing of measurements) plane i
@@ -139,8 +152,8 @@ def lh2_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
     common logging delay stays: it shifts every state alike)."""
     a, t = _angle_events(log)
     repeat = repeated_hits(log)
-    finite = np.isfinite(a["angle"]) & np.isfinite(a["correctedAngle"])
-    keep = ~repeat & finite
+    valid = valid_hits(a)
+    keep = ~repeat & valid
     k, t = a[keep], t[keep]
     station = k["basestation"].astype(np.int64)
     axis = k["sweep"].astype(np.int64)
@@ -160,7 +173,7 @@ def lh2_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
     angles = Angles(time[order], station[order], axis[order], sensor[order], angle[order],
                     {"corrected_angle": k["correctedAngle"].astype(float)[order],
                      "log_time": t[order]})
-    return angles, _summary(a, station, repeat, finite)
+    return angles, _summary(a, station, repeat, valid)
 
 
 def _rotor_period(t: Array, burst: NDArray[np.int64]) -> float:

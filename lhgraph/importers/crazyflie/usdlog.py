@@ -68,6 +68,20 @@ class UsdLog:
         """Number of events called ``name`` (0 if the type is absent)."""
         return len(self.events[name]) if name in self.events else 0
 
+    def require(self, name: str, variables: tuple[str, ...], source: str | Path | None = None
+                ) -> None:
+        """InputError naming ``source`` when the events called ``name`` lack any of
+        ``variables`` (nothing to check when the log has no such events)."""
+        if name not in self.events:
+            return
+        missing = [v for v in variables if v not in self.events[name].dtype.names]
+        if missing:
+            raise InputError(f"{name} events lack {', '.join(missing)}", source)
+
+
+RESERVED = ("id", "timestamp")
+"""Field names every event record has: no variable may take them."""
+
 
 def _cstring(data: bytes, pos: int, source: Path) -> tuple[str, int]:
     end = data.find(b"\0", pos)
@@ -105,6 +119,11 @@ def _read_header(data: bytes, source: Path) -> tuple[int, tuple[EventType, ...],
             if m is None:
                 raise InputError(f"event {name!r}: variable {spec!r} is not 'name(T)'", source)
             variables.append((m.group(1), m.group(2)))
+        names = [v for v, _ in variables]
+        clash = sorted({v for v in names if names.count(v) > 1 or v in RESERVED})
+        if clash:
+            raise InputError(f"event {name!r}: variable name(s) {', '.join(clash)} repeated "
+                             "or reserved (id, timestamp)", source)
         types.append(EventType(type_id, name, tuple(variables)))
     if len({t.id for t in types}) != len(types):
         raise InputError("header lists an event id twice", source)
