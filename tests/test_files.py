@@ -324,3 +324,20 @@ def test_out_of_range_integers_and_degenerate_boards_are_refused(tmp_path):
     for name, (text, message) in cases.items():
         with pytest.raises(InputError, match=rf"{name}\.toml:sensors.*{message}"):
             load_board(_write(tmp_path, f"{name}.toml", text))
+
+
+def test_bom_station_indices_and_large_sweep_numbers(tmp_path):
+    from lhgraph.io.files import read_toml
+
+    assert read_toml(_write(tmp_path, "bom.toml", "\ufeff[a]\nb = 1\n")) == {"a": {"b": 1}}
+    table = "[lighthouses.{}]\nposition = [0.0, 0.0, 0.0]\nquaternion = [1.0, 0.0, 0.0, 0.0]\n"
+    for text, message in ((table.format("-1"), "must be >= 0"),
+                          (table.format("1") + table.format("01"), "station 1 given twice")):
+        with pytest.raises(InputError, match=message):
+            load_stations(_write(tmp_path, "st.toml", "reference = 0\n" + text))
+    # sweep numbers are keyed with the station, not packed into one integer: sweep 1 of
+    # station 64 and sweep 2 of station 0 stay two sweeps
+    header = "time,lighthouse,axis,sensor,angle,sweep\n"
+    angles = load_angles(_write(tmp_path, "sw.csv", header + "0.1,64,0,0,0.1,1\n"
+                                "0.1,0,0,0,0.1,2\n0.1,0,0,1,0.1,2\n"))
+    assert sorted(np.bincount(angles.sweep_ids()).tolist()) == [1, 2]

@@ -34,6 +34,12 @@ def test_solve_flags_duration_and_no_overwrite(tmp_path, capsys):
     assert main(args) == 2
     assert "exists already" in capsys.readouterr().err
     assert main([*args, "--force"]) == 0
+    # one file named for two outputs is refused before solving, whatever the spelling
+    capsys.readouterr()
+    same = [str(tmp_path / "." / "result.toml") if a == str(traj) else a for a in args]
+    assert main([*same, "--force"]) == 2
+    assert "must be different files" in capsys.readouterr().err
+    assert load_stations(out).reference == 0
 
 
 def test_version_and_plain_progress(tmp_path, capsys):

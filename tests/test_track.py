@@ -142,7 +142,8 @@ def test_bad_inputs_one_line_exit_2_nothing_written(tmp_path, capsys):
              ({"--angles": tmp_path / "nope.csv"}, "nope.csv: file not found"),
              ({"--stations": tmp_path / "nope.toml"}, "nope.toml: file not found"),
              ({"--board": tmp_path / "nope.toml"}, "neither a built-in board"),
-             ({"--calibration": tmp_path / "nope_ootx.toml"}, "nope_ootx.toml")]
+             ({"--calibration": tmp_path / "nope_ootx.toml"}, "nope_ootx.toml"),
+             ({"--delay": 0.1}, "--delay: a delay applies to streaming only")]
     for change, message in cases:
         argv = ["track"] + [str(x) for k, v in (base | change).items() for x in (k, v)]
         capsys.readouterr()

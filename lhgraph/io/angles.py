@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
-from lhgraph.io.files import CSV_ENCODING, read_csv_columns, write_csv_columns
+from lhgraph.io.files import TEXT_ENCODING, read_csv_columns, write_csv_columns
 from lhgraph.model.board import Board
 
 SWEEP_GAP_S = 4e-3
@@ -56,9 +56,9 @@ class Angles:
         one sweep while they are less than ``max_gap_s`` after the sweep's first hit.
         """
         if "sweep" in self.extra:
-            key = np.asarray(self.extra["sweep"], dtype=np.int64) * 64 + self.lighthouse
-            _, ids = np.unique(key, return_inverse=True)
-            return ids.astype(np.int64)
+            key = np.stack([np.asarray(self.extra["sweep"], dtype=np.int64), self.lighthouse])
+            _, ids = np.unique(key, axis=1, return_inverse=True)
+            return ids.ravel().astype(np.int64)
         ids = np.empty(len(self), dtype=np.int64)
         open_sweeps: dict[tuple[int, int], tuple[int, float]] = {}
         count = 0
@@ -131,7 +131,7 @@ def load_angles(path: str | Path) -> Angles:
 
 def _extra_names(path: str | Path) -> list[str]:
     try:
-        with Path(path).open(encoding=CSV_ENCODING) as f:
+        with Path(path).open(encoding=TEXT_ENCODING) as f:
             header = [h.strip() for h in f.readline().split(",")]
     except (OSError, UnicodeDecodeError):
         return []  # read_csv_columns says what is wrong with the file

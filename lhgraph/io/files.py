@@ -26,9 +26,9 @@ from lhgraph.errors import InputError
 INT_EXACT = 2**53
 """Integers in the contract files (ids, indices, counts) stay below this magnitude: exact as
 a float, and far inside 64 bits."""
-CSV_ENCODING = "utf-8-sig"
-"""CSV files are UTF-8; a leading byte-order mark (as some spreadsheet programs write) is
-skipped."""
+TEXT_ENCODING = "utf-8-sig"
+"""Text inputs (CSV, TOML) are UTF-8; a leading byte-order mark (as some spreadsheet programs
+and editors write) is skipped."""
 
 
 def unreadable(exc: OSError, path: str | Path, expected: str) -> InputError:
@@ -54,11 +54,23 @@ def read_input(path: str | Path, expected: str) -> bytes:
         raise unreadable(exc, path, expected) from None
 
 
+def read_json_object(path: str | Path) -> dict[str, Any] | None:
+    """The JSON object in ``path``, or None when the file cannot be read, is not JSON or
+    holds something else (a stored result a command then makes again)."""
+    import json  # here: only the run and study folders need it
+
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
 def read_toml(path: str | Path) -> dict[str, Any]:
     """Parse a TOML file; missing or malformed files raise InputError."""
     data = read_input(path, "a TOML file")
     try:
-        return tomllib.loads(data.decode("utf-8"))
+        return tomllib.loads(data.decode(TEXT_ENCODING))  # a leading BOM is skipped
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"not valid TOML ({exc})", path) from None
     except UnicodeDecodeError:
@@ -186,12 +198,19 @@ def station_tables(
     tables = data.get("lighthouses")
     if not isinstance(tables, dict) or not tables:
         raise InputError("expected [lighthouses.<index>] tables", source)
+    seen: dict[int, str] = {}
     for name, table in tables.items():
         where = f"lighthouses.{name}"
         try:
             index = int(name)
         except ValueError:
             raise InputError("station index must be an integer", source, where) from None
+        if not 0 <= index < INT_EXACT:
+            raise InputError(f"station index must be >= 0, got {index}", source, where)
+        if index in seen:
+            raise InputError(f"station {index} given twice (also as lighthouses.{seen[index]})",
+                             source, where)
+        seen[index] = name
         if not isinstance(table, dict):
             raise InputError("expected a table", source, where)
         yield index, table, where
@@ -224,7 +243,7 @@ def read_csv_columns(
     """
     path = Path(path)
     try:
-        f = path.open(newline="", encoding=CSV_ENCODING)
+        f = path.open(newline="", encoding=TEXT_ENCODING)
     except OSError as exc:
         raise unreadable(exc, path, "a CSV file") from None
     with f:
@@ -257,7 +276,7 @@ def read_csv_columns(
                for j, name in wanted):
             return {name: fast[:, j].astype(np.int64) if types.get(name, float) is int
                     else fast[:, j] for j, name in wanted}
-        f = path.open(newline="", encoding=CSV_ENCODING)
+        f = path.open(newline="", encoding=TEXT_ENCODING)
         with f:
             rows = list(csv.reader(f))[1:]
     out: dict[str, NDArray] = {}

@@ -11,7 +11,6 @@ renderer when it works, else matplotlib). Open3D is imported only inside these f
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +20,7 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.geometry.transforms import transform_points
-from lhgraph.io.files import check_writable, write_atomic
+from lhgraph.io.files import check_writable, read_json_object, write_atomic
 from lhgraph.io.stations import load_stations
 from lhgraph.io.trajectory import load_trajectory
 from lhgraph.model.board import Board, load_board
@@ -70,11 +69,11 @@ def frustum_segments(T_world_lh: NDArray, depth_m: float = FRUSTUM_DEPTH_M,
 
 
 def _run_board(run_dir: Path) -> Board | None:
-    summary = run_dir / "summary.json"
-    if not summary.is_file():
-        return None
-    board = json.loads(summary.read_text()).get("inputs", {}).get("board")
-    return load_board(board["path"]) if board and Path(board["path"]).is_file() else None
+    summary = read_json_object(run_dir / "summary.json") or {}
+    inputs = summary.get("inputs")
+    board = inputs.get("board") if isinstance(inputs, dict) else None
+    path = board.get("path") if isinstance(board, dict) else None
+    return load_board(path) if isinstance(path, str) and Path(path).is_file() else None
 
 
 PATH_COLOURS = ((1.0, 0.5, 0.0), (0.6, 0.2, 0.7), (0.1, 0.6, 0.6), (0.5, 0.4, 0.1))

@@ -36,6 +36,8 @@ from lhgraph.model.station import FactoryCalibration
 from lhgraph.signal.pulses import LightPulses
 
 TICK_HZ = 48_000_000
+MAX_CHANNEL = 255
+"""The largest raw light channel a libsurvive device's ``channelMap`` may name."""
 _CAL_KEYS = {"phase": "fcalphase", "tilt": "fcaltilt", "curve": "fcalcurve",
              "gibphase": "fcalgibpha", "gibmag": "fcalgibmag"}
 
@@ -106,6 +108,10 @@ def read_libsurvive(path: str | Path, device: str | None = None) -> LibsurviveRe
                          f"data: {found})", path)
     recording = _recording(path, device, c_rows[device], a_rows.get(device, []))
     channel_map = _channel_map(configs.get(device, ""))
+    if channel_map is not None and (min(channel_map) < 0 or max(channel_map) > MAX_CHANNEL
+                                    or len(set(channel_map)) != len(channel_map)):
+        raise InputError(f"device {device!r}: its channelMap must list distinct channels in "
+                         f"0..{MAX_CHANNEL}", path)
     if channel_map is not None:  # C lines carry raw channels; A lines sensor indices
         lookup = np.full(max(max(channel_map), int(recording.pulses.sensor.max())) + 1, -1)
         lookup[channel_map] = np.arange(len(channel_map))
@@ -122,9 +128,10 @@ def _channel_map(config_text: str) -> list[int] | None:
     if not found:
         return None
     try:
-        return [int(v) for v in found.group(1).split(",")]
+        channels = [int(v) for v in found.group(1).split(",")]
     except ValueError:
         return None
+    return channels or None
 
 
 def _recording(path: Path, device: str, c_rows: list[list[str]], a_rows: list[list[str]]

@@ -30,7 +30,7 @@ from lhgraph.estimation.metrics import PoseError, station_errors
 from lhgraph.estimation.result import Residuals, SolveResult
 from lhgraph.estimation.spread import robust_sigma
 from lhgraph.geometry.transforms import euler_zyx, matrix_to_quat
-from lhgraph.io.files import check_writable, write_atomic, write_csv_columns
+from lhgraph.io.files import check_writable, read_json_object, write_atomic, write_csv_columns
 from lhgraph.io.stations import Stations, load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
 from lhgraph.model.board import save_board, with_sensor_offsets
@@ -233,9 +233,8 @@ def finished_run(folder: Path, method: str, key: str, truth: Stations | None
     from lhgraph.io.files import read_csv_columns
     from lhgraph.io.trajectory import load_trajectory
 
-    try:
-        summary = json.loads((folder / "summary.json").read_text())
-    except (OSError, ValueError):
+    summary = read_json_object(folder / "summary.json")
+    if summary is None:
         return None
     if summary.get("resume_key") != key or summary.get("method") != method or not all(
             (folder / name).is_file() for name in RUN_FILES):

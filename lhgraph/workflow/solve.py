@@ -129,9 +129,13 @@ def solve_to_files(config: SolveConfig, overwrite: bool = False,
         raise InputError("the sensor positions are solved by the graph method only",
                          config.path, "board_output")
     check_inputs(config)
-    for target in (config.output, config.trajectory, config.board_output):
-        if target is not None:
-            check_writable(target, overwrite, create_parents=False)
+    targets = [Path(t) for t in (config.output, config.trajectory, config.board_output)
+               if t is not None]
+    if len({t.resolve() for t in targets}) < len(targets):
+        raise InputError("output, trajectory and board output must be different files",
+                         config.output)
+    for target in targets:
+        check_writable(target, overwrite, create_parents=False)
     truth = load_stations(config.truth) if config.truth else None
     inputs = load_inputs(config)
     result = run_config(config, progress, inputs)

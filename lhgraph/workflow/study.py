@@ -30,7 +30,7 @@ from lhgraph.config import Table, check_fields, option, rules
 from lhgraph.errors import InputError, LhgraphError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.geometry.transforms import euler_zyx
-from lhgraph.io.files import read_toml, write_atomic
+from lhgraph.io.files import read_json_object, read_toml, write_atomic
 from lhgraph.io.stations import Stations
 from lhgraph.report.figures import png_bytes
 from lhgraph.sim.simulate import SimulationConfig, paper_protocol, simulate
@@ -229,16 +229,6 @@ def case_key(config: SimulationConfig, method: str, graph: GraphOptions,
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def stored_result(path: Path) -> dict | None:
-    """A stored result of a study directory, or None (to be run again) when it is not one:
-    unreadable, not JSON or not a JSON object."""
-    try:
-        stored = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        return None
-    return stored if isinstance(stored, dict) else None
-
-
 def run_study(study: StudyConfig, out_dir: str | Path, jobs: int = 1,
               scheduler: str | None = None, rerun: bool = False,
               progress: Callable[[str], None] | None = None) -> StudyResult:
@@ -262,7 +252,7 @@ def run_study(study: StudyConfig, out_dir: str | Path, jobs: int = 1,
         for method in study.methods:
             key = case_key(config, method, study.graph, study.paper)
             path = result_file(out_dir, name, method)
-            stored = stored_result(path) if path.exists() and not rerun else None
+            stored = read_json_object(path) if path.exists() and not rerun else None
             if stored is not None and stored.get("key") == key:
                 records.append(stored)
             else:

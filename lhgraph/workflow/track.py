@@ -66,6 +66,9 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
     check_writable(output, overwrite)
     if imu is not None and streaming:
         raise InputError("IMU factors are batch only: drop --streaming or --imu", "--imu")
+    if delay_s is not None and not streaming:
+        raise InputError("a delay applies to streaming only: add --streaming or drop it",
+                         "--delay")
     delay_s = DELAY_S if delay_s is None else delay_s
     if not 0 <= delay_s < 0.5:
         raise InputError(f"must be in [0, 0.5) s, the smoother's lag (got {delay_s:g})",

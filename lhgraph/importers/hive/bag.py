@@ -143,6 +143,10 @@ def read_hive_bag(bag_path: str | Path) -> HiveBag:
                     tracker = msg.trackers[0]
     except (AnyReaderError, ReaderError) as exc:
         raise InputError(f"not a readable ROS1 bag ({exc})", path) from None
+    except (UnicodeDecodeError, AssertionError, ValueError, KeyError, IndexError) as exc:
+        # what rosbags raises on bytes it does not expect inside a bag's records
+        raise InputError(f"not a readable ROS1 bag (corrupted: {type(exc).__name__})",
+                         path) from None
     if not light_rows or not imu or not mocap or tracker is None:
         raise InputError("hive recording without light, IMU, mocap or tracker messages", path)
     return _assemble(path, light_rows, lighthouses, tracker, imu, mocap, mocap_topic)
