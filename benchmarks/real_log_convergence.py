@@ -96,7 +96,7 @@ class StepRecorder:
         self.rows: list[tuple[int, int, float, float]] = []
         self._last = None
 
-    def __call__(self, values: gtsam.Values) -> bool:
+    def __call__(self, values: gtsam.Values, linearized=None) -> bool:
         R = np.stack([values.atPose3(k).rotation().matrix() for k in self.keys])
         p1 = values.atPose3(STATION_POSE.key(1)).translation()
         if self._last is not None:
@@ -105,7 +105,7 @@ class StepRecorder:
             self.rows.append((int(np.sum(turn > 1e-3)), int(np.sum(turn > 0.1)),
                               float(turn.max()), float(np.linalg.norm(p1 - q1))))
         self._last = (R, p1)
-        return self.hook(values)
+        return self.hook(values, linearized)
 
 
 def still_moving(board, angles, models, cap: int, every: int = 5) -> list[str]:

@@ -19,6 +19,7 @@ import pytest
 
 from lhgraph.cli import main
 from lhgraph.errors import InputError
+from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.track import track
 from lhgraph.estimation.inertial import inertial_data
 from lhgraph.estimation.residuals import accel_residuals, gyro_residuals
@@ -255,7 +256,6 @@ def test_gyro_scale_and_time_offset_are_solved(miscalibrated_imu):
     # solved with the IMU calibration: the scales within 2 %, the offset within 2 ms (it
     # comes out 1.5-1.7 ms low over these 8 s, with either accelerometer noise estimate), and
     # station 1 better than with the IMU taken as read
-    from lhgraph.estimation.graph.options import GraphOptions
     from lhgraph.estimation.graph.solver import solve_graph
     from lhgraph.estimation.metrics import station_errors
 
@@ -284,7 +284,6 @@ def test_imu_position_is_solved():
     # and angular acceleration too): solved with imu_position_sigma_m, its position within
     # 1 cm per axis and the accelerometer's residuals several times smaller than with the
     # IMU taken at the origin
-    from lhgraph.estimation.graph.options import GraphOptions
     from lhgraph.estimation.graph.solver import solve_graph
     from lhgraph.sim.imu import ImuConfig
 
@@ -310,7 +309,6 @@ def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
     # accelerometer factors' with respect to the states' angular rates, against central
     # differences of the evaluator's residuals
     from lhgraph.estimation.graph.factors import build_graph
-    from lhgraph.estimation.graph.options import GraphOptions
     from lhgraph.estimation.graph.variables import BOARD_TWIST, IMU_CALIBRATION, initial_values
     from lhgraph.estimation.inertial import initial_gravity
     from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
@@ -416,7 +414,6 @@ def test_facing_stations_with_a_one_sided_board_join_through_the_imu():
     models = {k: s.model for k, s in sim.truth.stations.items()}
     with pytest.raises(SolverError, match="never seen by it and the reference"):
         solve_graph(sim.board, sim.angles, models)
-    from lhgraph.estimation.graph.options import GraphOptions
 
     result = solve_graph(sim.board, sim.angles, models, imu=sim.imu.stream)
     error = station_errors(sim.truth, result.stations)[0]
@@ -447,7 +444,6 @@ def test_preintegrated_gyro_jacobians_match_numerical(miscalibrated_imu):
     import gtsam
 
     from lhgraph.estimation.graph.factors import build_graph
-    from lhgraph.estimation.graph.options import GraphOptions
     from lhgraph.estimation.graph.variables import BOARD_POSE, IMU_BIAS, initial_values
     from lhgraph.estimation.inertial import initial_gravity
     from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
@@ -516,7 +512,6 @@ def test_board_capture_carries_the_imu_to_the_solve(tmp_path):
 def test_reading_noise_and_the_accelerometer_factor_sigma():
     # the difference-based estimate finds a white noise under a smooth hand-held signal;
     # the options take 4x it for the accelerometer factors, within [floor, ceiling]
-    from lhgraph.estimation.graph.options import GraphOptions
     from lhgraph.estimation.inertial import (
         ACCEL_FACTOR_NOISE_RATIO,
         gyro_reading_sigma,
@@ -556,3 +551,29 @@ def test_long_steps_loosen_their_accelerometer_factor():
     # 0.6-1.0 s: middle 0.8 s reads 0, the mean of x is 3 * 10/40: rms over 3 axes
     assert data.force_spread[3] == pytest.approx(0.75 / np.sqrt(3), rel=1e-3)
     assert np.allclose(data.accel_sigmas(0.1), np.sqrt(0.01 + data.force_spread**2))
+
+
+def test_accelerometer_noise_over_its_redundancy(deck_with_imu):
+    # a simulated deck whose accelerometer reads with 0.2 m/s^2 of white noise: the factors'
+    # noise starts at 4x the readings' noise from the stream (the 0.5 ceiling here) and stays
+    # there with "stream"; over the factors' redundancy ("auto" on few-diode data) it comes
+    # out at the simulated noise; "auto" picks the redundancy on few-diode data and with the
+    # IMU calibration solved, the stream's start otherwise
+    from lhgraph.estimation.graph.solver import resolve_estimates, solve_graph
+    from lhgraph.sim.imu import ImuConfig
+
+    capture, _ = deck_with_imu
+    imu = simulate_imu(capture, ImuConfig(accel_sigma_mps2=0.2), seed=1)
+    found = {}
+    for estimate in ("stream", "auto"):
+        result = solve_graph(capture.board, capture.angles,
+                             options=GraphOptions(accel_sigma_estimate=estimate),
+                             imu=imu.stream)
+        found[estimate] = result.diagnostics["accel_sigma_mps2"]
+    assert found["stream"] == pytest.approx(0.5, rel=0.05)  # + each step's own term
+    assert found["auto"] == pytest.approx(0.2, rel=0.25)
+    picks = {(few, calibrated): resolve_estimates(
+        GraphOptions(gyro_scale_sigma=0.1 if calibrated else 0.0), few, True)
+        .accel_sigma_estimate for few in (False, True) for calibrated in (False, True)}
+    assert picks == {(False, False): "stream", (False, True): "redundancy",
+                     (True, False): "redundancy", (True, True): "redundancy"}

@@ -56,9 +56,11 @@ class Angles:
         one sweep while they are less than ``max_gap_s`` after the sweep's first hit.
         """
         if "sweep" in self.extra:
-            key = np.stack([np.asarray(self.extra["sweep"], dtype=np.int64), self.lighthouse])
-            _, ids = np.unique(key, axis=1, return_inverse=True)
-            return ids.ravel().astype(np.int64)
+            _, sweep = np.unique(np.asarray(self.extra["sweep"], dtype=np.int64),
+                                 return_inverse=True)
+            stations, station = np.unique(self.lighthouse, return_inverse=True)
+            _, ids = np.unique(sweep * len(stations) + station, return_inverse=True)
+            return ids.astype(np.int64)
         ids = np.empty(len(self), dtype=np.int64)
         open_sweeps: dict[tuple[int, int], tuple[int, float]] = {}
         count = 0

@@ -129,8 +129,7 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
             else None)
     offset = (sensor_offset_family(problem.n_sensors) if options.sensor_offset_sigma_m > 0
               else None)
-    calibrated = (options.gyro_scale_sigma > 0 or options.imu_time_offset_sigma_s > 0
-                  or options.imu_rotation_sigma_rad > 0 or options.imu_position_sigma_m > 0)
+    calibrated = options.imu_calibrated
     layout = VariableLayout.of_problem(problem.n_states, len(problem.station_ids),
                                        fixed_stations=T_world_lh is not None,
                                        inertial=inertial is not None, diode_bias=bias,

@@ -49,8 +49,8 @@ def redundancy(lin: gtsam.GaussianFactorGraph, groups: list[range], ordering: gt
     ``N = A^T A``): the degrees of freedom the fit leaves their residuals, so that
     ``e^T e / redundancy`` estimates their variance factor. The trace by Hutchinson's
     estimator over ``probes`` Rademacher vectors ``z`` (seeded: the same number for the same
-    system): ``z^T A_g N^-1 A_g^T z``, with ``N^-1 = R^-1 R^-T`` from ``lin`` eliminated
-    sequentially in ``ordering`` (once for every group)."""
+    system): ``z^T A_g N^-1 A_g^T z = |R^-T A_g^T z|^2``, with ``N = R^T R`` from ``lin``
+    eliminated sequentially in ``ordering`` (once for every group)."""
     net = lin.eliminateSequential(ordering)
     rng = np.random.default_rng(seed)
     zero = {key: np.zeros(dim) for key, dim in dims.items()}
@@ -59,7 +59,6 @@ def redundancy(lin: gtsam.GaussianFactorGraph, groups: list[range], ordering: gt
         members = [lin.at(i) for i in factors]
         rows = np.array([f.rows() for f in members])
         bounds = np.r_[0, np.cumsum(rows)]
-        b = np.concatenate([f.getb() for f in members]) if members else np.zeros(0)
         traces = []
         for _ in range(probes):
             g = gtsam.VectorValues()
@@ -68,9 +67,7 @@ def redundancy(lin: gtsam.GaussianFactorGraph, groups: list[range], ordering: gt
             z = rng.choice([-1.0, 1.0], int(bounds[-1]))
             for f, a, e in zip(members, bounds[:-1], bounds[1:], strict=True):
                 f.transposeMultiplyAdd(1.0, z[a:e], g)
-            u = net.backSubstitute(net.backSubstituteTranspose(g))
-            Au = np.concatenate([f.error_vector(u) for f in members]) + b if members else b
-            traces.append(float(z @ Au))
+            traces.append(float(np.sum(net.backSubstituteTranspose(g).vector() ** 2)))
         n = int(bounds[-1])
         out.append((n, n - float(np.mean(traces))))
     return out
@@ -97,16 +94,20 @@ class NoiseAdaptation:
         return (options.adapt_motion_prior or options.adapt_angle_sigma
                 or options.adapt_gyro_sigma or options.accel_sigma_estimate == "redundancy")
 
-    def __call__(self, values: gtsam.Values) -> bool:
+    def __call__(self, values: gtsam.Values,
+                 linearized: Callable[[], gtsam.GaussianFactorGraph] | None = None) -> bool:
+        """Update the levels at ``values`` (``linearized``: the graph linearised there, when
+        the caller has it or will make it anyway); whether they changed."""
         if self.rounds_left <= 0:
             return False
         self.evaluator.evaluate(values)
-        changed = self._update(values)
+        changed = self._update(values, linearized or (lambda: self.graph.linearize(values)))
         if changed:
             self.rounds_left -= 1
         return changed
 
-    def _update(self, values: gtsam.Values) -> bool:
+    def _update(self, values: gtsam.Values,
+                linearized: Callable[[], gtsam.GaussianFactorGraph]) -> bool:
         """One variance-component update at the evaluator's current point; whether anything
         changed (False: both levels match the data or sit at their bounds)."""
         ev, options = self.evaluator, self.options
@@ -114,7 +115,7 @@ class NoiseAdaptation:
         redundant = options.motion_prior_estimate == "redundancy"
         groups = self._redundancy_groups()
         if groups and self._redundancy is None:
-            self._redundancy = self._redundancies(values, groups)
+            self._redundancy = self._redundancies(linearized(), values.dims(), groups)
         if "motion" in groups:
             rows, dof = self._redundancy["motion"]
             chi2 *= rows / max(dof, 1.0)
@@ -190,10 +191,10 @@ class NoiseAdaptation:
             groups["accel"] = ev.accel_factors
         return groups
 
-    def _redundancies(self, values: gtsam.Values, groups: dict[str, range]
-                      ) -> dict[str, tuple[int, float]]:
-        """Rows and redundancy of each of ``groups`` at ``values`` (:func:`redundancy`)."""
-        lin = self.graph.linearize(values)
+    def _redundancies(self, lin: gtsam.GaussianFactorGraph, dims: dict[int, int],
+                      groups: dict[str, range]) -> dict[str, tuple[int, float]]:
+        """Rows and redundancy of each of ``groups`` in the linearised graph ``lin`` over
+        variables of dimensions ``dims`` (:func:`redundancy`)."""
         found = redundancy(lin, list(groups.values()),
-                           self.evaluator.layout.elimination_ordering(), values.dims())
+                           self.evaluator.layout.elimination_ordering(), dims)
         return dict(zip(groups, found, strict=True))

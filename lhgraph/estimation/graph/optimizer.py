@@ -33,6 +33,7 @@ levels); otherwise the graph is linearised again at the result.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
@@ -48,9 +49,12 @@ Array = NDArray[np.float64]
 Progress = Callable[[str], None]
 Cost = Callable[[gtsam.Values], float]
 """The graph's error at some values (the same number as ``graph.error``)."""
-NoiseHook = Callable[[gtsam.Values], bool]
-"""Called with the values after every accepted step; returns whether it changed the noise
-levels (the cost function then gives new numbers)."""
+Linearized = Callable[[], gtsam.GaussianFactorGraph]
+"""The graph linearised at the current values, made on the first call (and reused by the next
+iteration when the noise levels stay)."""
+NoiseHook = Callable[[gtsam.Values, Linearized], bool]
+"""Called with the values after every accepted step (and their linearisation, on demand);
+returns whether it changed the noise levels (the cost function then gives new numbers)."""
 
 
 class Status(StrEnum):
@@ -210,8 +214,9 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
     iterations = 0
     previous_step = None  # the last accepted station step at the current noise levels
     damping = _Damping(values)
+    linearized = None  # the hook's linearisation at the accepted values, if it made one
     for iterations in range(1, params.max_iterations + 1):
-        lin = graph.linearize(values)
+        lin = linearized() if linearized is not None else graph.linearize(values)
         while True:
             system = lin if lam == 0.0 else _joined(lin, damping(lam))
             tree = system.eliminateMultifrontal(ordering)
@@ -241,7 +246,10 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
         history.append(error)
         if not accepted:  # no descent even with the strongest damping: stalled
             break
-        rescaled = noise_hook(values) if noise_hook is not None else False
+        linearized = functools.cache(lambda at=values: graph.linearize(at))
+        rescaled = noise_hook(values, linearized) if noise_hook is not None else False
+        if rescaled or linearized.cache_info().currsize == 0:
+            linearized = None  # made at other noise levels, or not made
         if rescaled:
             error = cost(values)
         remaining = remaining_sigmas(station_step, previous_step)

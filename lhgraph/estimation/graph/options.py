@@ -14,7 +14,7 @@ LOSSES = ("cauchy", "huber")
 SOLVERS = ("lm", "isam2")
 SWEEP_TIMES = ("auto", "stamped")
 PRIOR_ESTIMATES = ("auto", "chi2", "redundancy")
-ACCEL_ESTIMATES = ("stream", "redundancy")
+ACCEL_ESTIMATES = ("auto", "stream", "redundancy")
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,7 @@ class GraphOptions:
     their hat matrix, :func:`~lhgraph.estimation.graph.noise.redundancy`: the degrees of
     freedom the fit leaves the prior; no floor, ``min_psd_factor`` unused), ``"auto"``:
     ``"redundancy"`` on few-diode data without IMU factors, ``"chi2"`` otherwise
-    (:func:`~lhgraph.estimation.graph.solver.prior_estimate`; on the simulated decks the
+    (:func:`~lhgraph.estimation.graph.solver.resolve_estimates`; on the simulated decks the
     floored chi2 prior is too stiff for a hand-held 4-diode deck: with the twins chosen well
     its stations were 1.9 mm off with NEES 15.5, 1.0 mm with NEES 3.4 by the redundancy);
     ``solver``:
@@ -77,12 +77,16 @@ class GraphOptions:
     ``imu_max_gap_s`` of a state; ``adapt_accel_sigma``: the accelerometer factors' noise
     is instead :func:`~lhgraph.estimation.inertial.accel_factor_sigma` of the stream (its
     readings' own noise, vibration included), between ``min_accel_sigma_mps2`` and
-    ``accel_sigma_mps2`` (the ceiling); ``accel_sigma_estimate``: ``"redundancy"`` (the
-    default): from there the variance-component updates rescale the accelerometer factors'
-    noise to their chi2 over their redundancy (the degrees of freedom the fit leaves them, as
-    for the motion prior), within the same bounds; ``"stream"``: it stays where the stream
-    put it; ``gyro_preintegration``: also a factor per step on the
-    rotation the gyro's readings between the two states integrate to
+    ``accel_sigma_mps2`` (the ceiling); ``accel_sigma_estimate``: ``"redundancy"``: from
+    there the variance-component updates rescale the accelerometer factors' noise to their
+    chi2 over their redundancy (the degrees of freedom the fit leaves them, as for the motion
+    prior), within the same bounds; ``"stream"``: it stays where the stream put it;
+    ``"auto"`` (the default): ``"redundancy"`` on few-diode data or with the IMU calibration
+    solved (:attr:`imu_calibrated`), ``"stream"`` otherwise (many diodes pin the path: the
+    accelerometer factors keep ~2 % of their rows as redundancy, too little to estimate
+    from, and the estimate cost 1.5x in solve time; docs/track.md); ``gyro_preintegration``:
+    also a factor per step on the rotation the gyro's readings between the two states
+    integrate to
     (:mod:`lhgraph.estimation.graph.imu_terms`; off by default: on the real Crazyflie log the
     deck's hit times and IMU stamps disagree by milliseconds at turns of ~1 rad/s, far above
     its noise, and it raised the light's residuals from 70 to 160 urad rms);
@@ -150,7 +154,7 @@ class GraphOptions:
     accel_sigma_mps2: float = option(0.5, gt=0)
     adapt_accel_sigma: bool = option(True)
     min_accel_sigma_mps2: float = option(0.02, gt=0)
-    accel_sigma_estimate: str = option("redundancy", choices=ACCEL_ESTIMATES)
+    accel_sigma_estimate: str = option("auto", choices=ACCEL_ESTIMATES)
     imu_max_gap_s: float = option(0.05, gt=0)
     gyro_preintegration: bool = option(False)
     adapt_gyro_sigma: bool = option(True)
@@ -165,6 +169,12 @@ class GraphOptions:
 
     def __post_init__(self) -> None:
         check_fields(self)
+
+    @property
+    def imu_calibrated(self) -> bool:
+        """Whether the graph solves an IMU calibration (any of its four sigmas set)."""
+        return (self.gyro_scale_sigma > 0 or self.imu_time_offset_sigma_s > 0
+                or self.imu_rotation_sigma_rad > 0 or self.imu_position_sigma_m > 0)
 
     def accel_start_sigma(self, imu: ImuStream) -> float:
         """The accelerometer factors' noise (m/s^2) to start from with the stream ``imu``:

@@ -102,10 +102,10 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     if progress:
         progress(f"initialised {problem.n_states} board states, {len(problem.hits.angle)} hits")
     t1 = time.perf_counter()
-    fit, ev, cov = _optimise(problem, prior_estimate(options, few, False), init, progress)
+    fit, ev, cov = _optimise(problem, resolve_estimates(options, few, False), init, progress)
     notes = []
     if imu is not None:
-        options = prior_estimate(options, few, True)
+        options = resolve_estimates(options, few, True)
         inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
         refined = Initialisation(ev.station_poses().copy(), ev.board_poses().copy(),
                                  ev.board_twists().copy())
@@ -231,14 +231,19 @@ def graph_preparation(angles: Angles, options: GraphOptions,
     return angles, options, few
 
 
-def prior_estimate(options: GraphOptions, few: bool, inertial: bool) -> GraphOptions:
-    """``options`` with ``motion_prior_estimate = "auto"`` resolved: ``"redundancy"`` on
-    few-diode data (``few``) without IMU factors, else ``"chi2"`` (with the IMU factors of a
-    simulated deck the floored estimate put station 1 1.06 mm off, the redundancy 1.32 mm)."""
-    if options.motion_prior_estimate != "auto":
-        return options
-    return replace(options, motion_prior_estimate="redundancy" if few and not inertial
-                   else "chi2")
+def resolve_estimates(options: GraphOptions, few: bool, inertial: bool) -> GraphOptions:
+    """``options`` with its ``"auto"`` estimates resolved: ``motion_prior_estimate``
+    ``"redundancy"`` on few-diode data (``few``) without IMU factors, else ``"chi2"`` (with
+    the IMU factors of a simulated deck the floored estimate put station 1 1.06 mm off, the
+    redundancy 1.32 mm); ``accel_sigma_estimate`` ``"redundancy"`` on few-diode data or with
+    the IMU calibration solved, else ``"stream"``."""
+    motion = options.motion_prior_estimate
+    if motion == "auto":
+        motion = "redundancy" if few and not inertial else "chi2"
+    accel = options.accel_sigma_estimate
+    if accel == "auto":
+        accel = "redundancy" if few or options.imu_calibrated else "stream"
+    return replace(options, motion_prior_estimate=motion, accel_sigma_estimate=accel)
 
 
 def _median_residual(ev: FactorEvaluator, values: gtsam.Values) -> float:

@@ -31,7 +31,7 @@ from lhgraph.estimation.graph.factors import build_graph
 from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import LMParams, OptimizerResult, levenberg_marquardt
 from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.solver import graph_preparation, prior_estimate
+from lhgraph.estimation.graph.solver import graph_preparation, resolve_estimates
 from lhgraph.estimation.graph.variables import BOARD_POSE, initial_values
 from lhgraph.estimation.inertial import inertial_data, start_with_imu
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
@@ -243,7 +243,7 @@ def track(board: Board, angles: Angles, stations: Stations,
     angles, options, few = graph_preparation(
         angles, options, progress, models or {k: stations.stations[k].model
                                               for k in stations.indices()})
-    options = prior_estimate(options, few, imu is not None)
+    options = resolve_estimates(options, few, imu is not None)
     problem, T_world_lh = tracking_problem(board, angles, stations, models)
     if few:
         init = FewDiodeInitialiser(cross_max_gap_s=TRACK_CROSS_GAP_S).with_stations(
