@@ -84,7 +84,8 @@ class GraphOptions:
     ``"auto"`` (the default): ``"redundancy"`` on few-diode data or with the IMU calibration
     solved (:attr:`imu_calibrated`), ``"stream"`` otherwise (many diodes pin the path: the
     accelerometer factors keep ~2 % of their rows as redundancy, too little to estimate
-    from, and the estimate cost 1.5x in solve time; docs/track.md); ``gyro_preintegration``:
+    from, and it took the 8 s capture's IMU solve from 1.3x to 1.8x the light-only one;
+    docs/solve.md); ``gyro_preintegration``:
     also a factor per step on the rotation the gyro's readings between the two states
     integrate to
     (:mod:`lhgraph.estimation.graph.imu_terms`; off by default: on the real Crazyflie log the
