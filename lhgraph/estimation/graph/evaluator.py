@@ -17,6 +17,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
+from lhgraph.estimation.graph.combined_imu import CombinedImu
 from lhgraph.estimation.graph.imu_terms import ImuTerms
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
@@ -107,7 +108,11 @@ class FactorEvaluator:
         self._bearing_scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
         self._jacobians_ready = False
         self.imu = None if inertial is None else ImuTerms(inertial, layout, options)
-        """The IMU factors' residuals (None without IMU factors)."""
+        """The twist IMU factors' residuals (None without them)."""
+        self.combined: CombinedImu | None = None
+        """GTSAM's combined IMU factors of the graph, evaluated in C++ (set by
+        :func:`~lhgraph.estimation.graph.factors.build_graph`; None without them): their
+        error joins :meth:`cost`."""
         self._bias = layout.family(DIODE_BIAS)
         self._bias_sigma = options.diode_bias_sigma_rad
         dim = 0 if self._bias is None else self._bias.dim
@@ -191,7 +196,8 @@ class FactorEvaluator:
         offsets = 0.5 * (self._O / self._offset_sigma) ** 2
         return float(bearing.sum() + offsets.sum() + self._board_prior_cost()
                      + 0.5 * self._motion_chi2().sum()
-                     + (0.0 if self.imu is None else self.imu.cost()))
+                     + (0.0 if self.imu is None else self.imu.cost())
+                     + (0.0 if self.combined is None else self.combined.cost(values)))
 
     def bearing_residuals(self) -> Array:
         """Per-hit angle residual, predicted (+ sweep offset) - measured (rad), in the
@@ -286,11 +292,15 @@ class FactorEvaluator:
 
     def imu_bias(self) -> Array | None:
         """The IMU bias ``[gyro (rad/s), accelerometer (m/s^2)]`` (6,) now (None without IMU
-        factors)."""
+        factors; with the combined factors the states' mean)."""
+        if self.combined is not None:
+            return self.combined.mean_bias(self._values)
         return None if self.imu is None else self.imu.imu[:6].copy()
 
     def gravity(self) -> Array | None:
         """The gravity vector (m/s^2, world) now (None without IMU factors)."""
+        if self.combined is not None:
+            return self._values.atVector(GRAVITY.key(0))
         return None if self.imu is None else self.imu.imu[6:].copy()
 
     def inertial_residuals(self) -> tuple[Array, Array]:
@@ -302,7 +312,9 @@ class FactorEvaluator:
 
     def inertial_summary(self) -> dict[str, float]:
         """What the IMU factors found at the evaluated point (:meth:`ImuTerms.summary`;
-        empty without IMU factors)."""
+        empty without IMU factors; with the combined factors :meth:`CombinedImu.summary`)."""
+        if self.combined is not None:
+            return self.combined.summary(self._values)
         return {} if self.imu is None else self.imu.summary()
 
     # --- internals ------------------------------------------------------------------------

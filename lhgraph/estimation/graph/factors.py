@@ -11,7 +11,10 @@
    a key of each of its bearing factors);
 3. **motion prior** (white noise on acceleration) between consecutive states, keys
    :func:`motion_keys`;
-4. with an IMU stream (:mod:`lhgraph.estimation.inertial`): a **gyro factor** on every
+4. with an IMU stream and ``imu_factors`` resolving to ``"combined"``: GTSAM's
+   preintegrated **combined IMU factor** over every step the stream covers, in C++
+   (:mod:`lhgraph.estimation.graph.combined_imu`); with ``"twist"``
+   (:mod:`lhgraph.estimation.inertial`): a **gyro factor** on every
    state's twist and the IMU bias (linear: GTSAM's ``LinearContainerFactor``, no Python
    callback; with the IMU calibration, ``gyro_scale_sigma`` / ``imu_time_offset_sigma_s``,
    a callback on the twist, the bias and the calibration), an **accelerometer factor** over
@@ -31,6 +34,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
+from lhgraph.estimation.graph.combined_imu import CombinedImu
 from lhgraph.estimation.graph.evaluator import SCALE_SIGMA_M2, FactorError, FactorEvaluator
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
@@ -130,11 +134,14 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
     offset = (sensor_offset_family(problem.n_sensors) if options.sensor_offset_sigma_m > 0
               else None)
     calibrated = options.imu_calibrated
+    combined = inertial is not None and options.imu_factor_kind == "combined"
     layout = VariableLayout.of_problem(problem.n_states, len(problem.station_ids),
                                        fixed_stations=T_world_lh is not None,
                                        inertial=inertial is not None, diode_bias=bias,
-                                       sensor_offset=offset, imu_calibration=calibrated)
-    ev = FactorEvaluator(problem, layout, loss, options, T_world_lh, inertial)
+                                       sensor_offset=offset, imu_calibration=calibrated,
+                                       combined_imu=combined)
+    ev = FactorEvaluator(problem, layout, loss, options, T_world_lh,
+                         None if combined else inertial)
     build = FactorBuilder(loss, options.sweep_offset_sigma_rad)
     graph = gtsam.NonlinearFactorGraph()
     for k in range(problem.n_states):
@@ -160,7 +167,10 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
     for k in range(problem.n_states - 1):
         graph.add(build.motion(k, ev.motion_covariances[k], ev.motion_error(k)))
     ev.motion_factors = range(first, graph.size())
-    if inertial is not None:
+    if combined:
+        ev.combined = CombinedImu(inertial.stream, problem.state_time, layout, options)
+        graph.push_back(ev.combined.graph)
+    elif inertial is not None:
         gyro_noise = gtsam.noiseModel.Isotropic.Sigma(3, options.gyro_sigma_rad_s)
         for k in np.flatnonzero(inertial.rate_ok).tolist():
             graph.add(gtsam.CustomFactor(

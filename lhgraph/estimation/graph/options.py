@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lhgraph.config import check_fields, option
+from lhgraph.errors import InputError
 from lhgraph.estimation.inertial import accel_factor_sigma
 from lhgraph.io.imu import ImuStream
 
@@ -15,6 +16,7 @@ SOLVERS = ("lm", "isam2")
 SWEEP_TIMES = ("auto", "stamped")
 PRIOR_ESTIMATES = ("auto", "chi2", "redundancy")
 ACCEL_ESTIMATES = ("auto", "stream", "redundancy")
+IMU_FACTORS = ("auto", "combined", "twist")
 
 
 @dataclass(frozen=True)
@@ -109,6 +111,16 @@ class GraphOptions:
     ``imu_position_sigma_m``: likewise the IMU's position in the board frame (m), the lever
     arm that adds the board's centripetal and angular acceleration to what the accelerometer
     reads;
+    ``imu_factors``: which IMU factors the graph gets: ``"combined"``, GTSAM's preintegrated
+    ``CombinedImuFactor`` between consecutive states, evaluated in C++, with a velocity and
+    an IMU bias per state (:mod:`lhgraph.estimation.graph.combined_imu`; its readings'
+    noise the stream's own times ``imu_noise_factor``, its biases wandering by
+    ``gyro_bias_walk`` (rad/s per root second) and ``accel_bias_walk`` (m/s^2 per root
+    second)); ``"twist"``, a gyro factor per state and an accelerometer factor per step on
+    the states' twists with one IMU bias (:mod:`lhgraph.estimation.inertial`: the factors
+    that solve the IMU's calibration and take ``gyro_preintegration``); ``"auto"``
+    (:attr:`imu_factor_kind`): ``"twist"`` when the calibration is solved or
+    ``gyro_preintegration`` is asked, ``"combined"`` otherwise;
     ``diode_bias_sigma_rad``: when positive, every station sees every diode on each axis
     with a constant angle bias of this prior spread (variables of the graph,
     :func:`~lhgraph.estimation.graph.variables.diode_bias_family`: the board's geometry
@@ -164,18 +176,36 @@ class GraphOptions:
     imu_time_offset_sigma_s: float = option(0.0, ge=0)
     imu_rotation_sigma_rad: float = option(0.0, ge=0)
     imu_position_sigma_m: float = option(0.0, ge=0)
+    imu_factors: str = option("auto", choices=IMU_FACTORS)
+    imu_noise_factor: float = option(1.0, gt=0)
+    gyro_bias_walk: float = option(1e-4, gt=0)
+    accel_bias_walk: float = option(1e-3, gt=0)
     diode_bias_sigma_rad: float = option(0.0, ge=0)
     sensor_offset_sigma_m: float = option(0.0, ge=0)
     rest_keep_every: int = option(1, ge=1)
 
     def __post_init__(self) -> None:
         check_fields(self)
+        if self.imu_factors == "combined" and (self.imu_calibrated or self.gyro_preintegration):
+            raise InputError("GTSAM's combined IMU factors solve no IMU calibration and have "
+                             "their own gyro preintegration: use 'twist' (or 'auto') with "
+                             "gyro_scale_sigma, imu_time_offset_sigma_s, imu_rotation_sigma_rad,"
+                             " imu_position_sigma_m or gyro_preintegration", where="imu_factors")
 
     @property
     def imu_calibrated(self) -> bool:
         """Whether the graph solves an IMU calibration (any of its four sigmas set)."""
         return (self.gyro_scale_sigma > 0 or self.imu_time_offset_sigma_s > 0
                 or self.imu_rotation_sigma_rad > 0 or self.imu_position_sigma_m > 0)
+
+    @property
+    def imu_factor_kind(self) -> str:
+        """``imu_factors`` with ``"auto"`` resolved: ``"twist"`` when the IMU calibration is
+        solved or ``gyro_preintegration`` asked (GTSAM's combined factor has neither),
+        ``"combined"`` otherwise."""
+        if self.imu_factors != "auto":
+            return self.imu_factors
+        return "twist" if self.imu_calibrated or self.gyro_preintegration else "combined"
 
     def accel_start_sigma(self, imu: ImuStream) -> float:
         """The accelerometer factors' noise (m/s^2) to start from with the stream ``imu``:

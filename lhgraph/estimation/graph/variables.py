@@ -15,12 +15,18 @@ sweep offset    ``o``   1    angle offset (rad) common to every diode of sweep k
 station pose    ``l``   6    ``T_world_lh`` of station slot s >= 1 (slot 0 is the world)
 IMU bias        ``i``   6    gyro (rad/s) and accelerometer (m/s^2) bias, board frame
 gravity         ``n``   3    gravity vector (m/s^2) in the world
-IMU calibration ``c``   7    gyro scale error, IMU time offset (s), IMU frame rotation
+IMU calibration ``c``   10   gyro scale error, IMU time offset (s), IMU frame rotation and
+                             position
+IMU velocity    ``v``   3    the board origin's velocity (m/s) in the world at sweep k
+IMU bias (k)    ``b``   6    accelerometer (m/s^2) and gyro (rad/s) bias at sweep k
+                             (``gtsam.imuBias.ConstantBias``)
 ==============  ======  ===  ============================================================
 
-The last three exist only when the graph has IMU factors (:mod:`lhgraph.estimation.inertial`),
-the calibration only when the options ask for it (``gyro_scale_sigma``,
-``imu_time_offset_sigma_s``).
+Gravity exists only when the graph has IMU factors. With the twist factors
+(:mod:`lhgraph.estimation.inertial`, ``imu_factors = "twist"``) so does the one IMU bias
+``i`` and, when the options ask for it (``gyro_scale_sigma``, ...), the calibration; with
+GTSAM's combined factors (:mod:`lhgraph.estimation.graph.combined_imu`) a velocity and a
+bias per state instead.
 """
 
 from __future__ import annotations
@@ -49,7 +55,8 @@ class VariableFamily:
     only; ``"chain"``: per board state, in time order; ``"root"``: last, shared by the whole
     capture, so their marginals are read off the root clique); ``relinearize_threshold``: iSAM2
     relinearises a variable whose step exceeds this (tangent units; 0.1 is GTSAM's default, 1.0
-    for variables the factors are nearly linear in)."""
+    for variables the factors are nearly linear in); ``is_bias``: a
+    ``gtsam.imuBias.ConstantBias`` (its vector: accelerometer, then gyro)."""
 
     name: str
     symbol: str
@@ -58,6 +65,7 @@ class VariableFamily:
     elimination: Elimination
     relinearize_threshold: float
     meaning: str
+    is_bias: bool = False
     _key0: int = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -88,6 +96,12 @@ IMU_CALIBRATION = VariableFamily(
     "rotation vector (rad) of the IMU's frame in the board's and the IMU's position (m) in "
     "the board frame (the accelerometer's lever arm)")
 
+IMU_VELOCITY = VariableFamily("IMU velocity", "v", 3, False, "chain", 1.0,
+                              "velocity (m/s) of the board origin in the world at sweep k")
+IMU_BIAS_STATE = VariableFamily("IMU bias at state", "b", 6, False, "chain", 1.0,
+                                "accelerometer (m/s^2) and gyro (rad/s) bias at sweep k",
+                                is_bias=True)
+
 
 DIODE_BIAS = "diode bias"
 SENSOR_OFFSET = "sensor offset"
@@ -111,7 +125,7 @@ def sensor_offset_family(n_sensors: int) -> VariableFamily:
 
 
 FAMILIES = (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE, IMU_BIAS, GRAVITY,
-            IMU_CALIBRATION)
+            IMU_CALIBRATION, IMU_VELOCITY, IMU_BIAS_STATE)
 """Every family the graph and the streaming smoother know."""
 
 
@@ -141,17 +155,24 @@ class VariableLayout:
     def of_problem(cls, n_states: int, n_stations: int, fixed_stations: bool = False,
                    inertial: bool = False, diode_bias: VariableFamily | None = None,
                    sensor_offset: VariableFamily | None = None,
-                   imu_calibration: bool = False) -> VariableLayout:
+                   imu_calibration: bool = False, combined_imu: bool = False
+                   ) -> VariableLayout:
         """The batch graph's layout: every family per board state ``0..n_states-1``, a station
         pose for slots ``1..n_stations-1`` (none with ``fixed_stations``: tracking, every
         station held at a known pose), with ``inertial`` one IMU bias and the gravity, and
-        with ``inertial`` and ``imu_calibration`` the IMU's calibration."""
+        with ``inertial`` and ``imu_calibration`` the IMU's calibration; with
+        ``combined_imu`` (GTSAM's combined IMU factors) instead a velocity and an IMU bias
+        per state and the gravity."""
         states = range(n_states)
         stations = range(0) if fixed_stations else range(1, n_stations)
-        imu = range(1) if inertial else range(0)
+        imu = range(1) if inertial and not combined_imu else range(0)
         families = {BOARD_POSE: states, BOARD_TWIST: states, SWEEP_OFFSET: states,
-                    STATION_POSE: stations, IMU_BIAS: imu, GRAVITY: imu}
-        if inertial and imu_calibration:
+                    STATION_POSE: stations, IMU_BIAS: imu,
+                    GRAVITY: range(1) if inertial else range(0)}
+        if inertial and combined_imu:
+            families[IMU_VELOCITY] = states
+            families[IMU_BIAS_STATE] = states
+        if inertial and imu_calibration and not combined_imu:
             families[IMU_CALIBRATION] = range(1)
         if diode_bias is not None:
             families[diode_bias] = range(n_stations)
@@ -219,7 +240,11 @@ class VariableLayout:
         return {family: T[s] for family, s in self._pose_slices.items()}
 
     def read_vectors(self, values: gtsam.Values, family: VariableFamily) -> Array:
-        """A vector family's values ``(n, dim)`` in index order."""
+        """A vector family's values ``(n, dim)`` in index order (a bias family's vectors:
+        accelerometer, then gyro)."""
+        if family.is_bias:
+            return np.array([values.atConstantBias(k).vector() for k in self._keys[family]]
+                            ).reshape(-1, family.dim)
         return gtsam.utilities.extractVectors(values, family.symbol)
 
     def read_steps(self, delta: gtsam.VectorValues, family: VariableFamily) -> Array:
@@ -229,7 +254,10 @@ class VariableLayout:
     def insert(self, values: gtsam.Values, family: VariableFamily, data: Array) -> None:
         """Insert ``data`` (``(n, 4, 4)`` poses or ``(n, dim)`` vectors, in index order)."""
         for key, x in zip(self._keys[family], data, strict=True):
-            values.insert(key, gtsam.Pose3(x) if family.is_pose else x)
+            if family.is_bias:
+                values.insert(key, gtsam.imuBias.ConstantBias(x[:3], x[3:]))
+            else:
+                values.insert(key, gtsam.Pose3(x) if family.is_pose else x)
 
 
 def chain_dissection(n: int, leaf: int = 64) -> list[int]:
@@ -254,7 +282,8 @@ def chain_dissection(n: int, leaf: int = 64) -> list[int]:
 def initial_values(layout: VariableLayout, init: Initialisation,
                    gravity: Array | None = None) -> gtsam.Values:
     """GTSAM Values of an initialisation (sweep offsets zero); with IMU variables in the
-    layout, the IMU bias zero and ``gravity`` (3,) m/s^2 in the world."""
+    layout, the IMU biases zero, ``gravity`` (3,) m/s^2 in the world and the states'
+    velocities in the world from their poses and twists."""
     values = gtsam.Values()
     layout.insert(values, STATION_POSE, init.L[layout.indices(STATION_POSE)])
     layout.insert(values, BOARD_POSE, init.X)
@@ -263,8 +292,13 @@ def initial_values(layout: VariableLayout, init: Initialisation,
     if layout.holds(GRAVITY, 0):
         if gravity is None:
             raise ValueError("a layout with IMU variables needs the initial gravity")
-        layout.insert(values, IMU_BIAS, np.zeros((1, 6)))
         layout.insert(values, GRAVITY, np.asarray(gravity, dtype=float)[None])
+    if layout.holds(IMU_BIAS, 0):
+        layout.insert(values, IMU_BIAS, np.zeros((1, 6)))
+    if layout.holds(IMU_VELOCITY, 0):
+        layout.insert(values, IMU_VELOCITY, np.einsum("kij,kj->ki", init.X[:, :3, :3],
+                                                      init.V[:, 3:]))
+        layout.insert(values, IMU_BIAS_STATE, np.zeros((len(init.X), 6)))
     for family in filter(None, (layout.family(DIODE_BIAS), layout.family(SENSOR_OFFSET),
                                 layout.family(IMU_CALIBRATION.name))):
         layout.insert(values, family, np.zeros((len(layout.indices(family)), family.dim)))
