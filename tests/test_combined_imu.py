@@ -174,3 +174,23 @@ def test_deck_with_a_hole_in_the_imu_solves(short_deck):
     errors = [station_errors(short_deck.truth, r.stations)[0].position_norm_m
               for r in (light, result)]
     assert errors[1] < max(errors[0], 2e-3), errors
+
+
+def test_an_imu_that_misfits_the_light_falls_back_to_the_twist_factors():
+    # a gyro reading half the rate (as hive's does): GTSAM's combined factors, trusting the
+    # readings' own noise, bend the light; the solve says so and refines with the twist
+    # factors instead (asked for explicitly, the combined factors stay, with the warning)
+    config = dataclasses.replace(load_simulation_config("configs/simulation/default.toml"),
+                                 duration_s=4.0,
+                                 imu=ImuConfig(rate_hz=500.0, gyro_scale_x=0.5,
+                                               gyro_scale_y=0.5, gyro_scale_z=0.5))
+    sim = simulate(config, 1)
+    models = {k: s.model for k, s in sim.truth.stations.items()}
+    result = solve_graph(sim.board, sim.angles, models, imu=sim.imu.stream)
+    assert any("refined with the twist factors" in w for w in result.warnings)
+    assert "accel_sigma_mps2" in result.diagnostics  # the twist factors' summary
+    kept = solve_graph(sim.board, sim.angles, models, GraphOptions(imu_factors="combined"),
+                       imu=sim.imu.stream)
+    assert not any("twist" in w for w in kept.warnings)
+    assert any("the IMU disagrees with the light" in w for w in kept.warnings)
+    assert "imu_chi2_rotation" in kept.diagnostics

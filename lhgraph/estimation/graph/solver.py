@@ -56,6 +56,10 @@ this factor (on the hive recording with its gyro taken as read, 0.48x the true r
 527 urad; a simulated gyro reading 0.5x: 1.28x; consistent simulated IMUs 1.02-1.10x)."""
 
 
+IMU_FACTOR_NAMES = {"combined": "GTSAM's combined IMU factors",
+                    "twist": "gyro and accelerometer factors on the twists"}
+
+
 def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | None = None,
                 options: GraphOptions | None = None, progress: Progress | None = None,
                 initialiser: Initialiser | None = None, imu: ImuStream | None = None
@@ -70,9 +74,15 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     of a receiver that logs a station's two sweeps together, are first put on each station's
     rotor grid, one board state per rotor cycle (``options.sweep_times``,
     :func:`retime_cycles`). ``imu``: the receiver's IMU stream (board frame, the angles'
-    clock): the light-only solution is refined by a second optimisation with gyro and
-    accelerometer factors (:mod:`lhgraph.estimation.inertial`), the IMU bias and the world's
-    gravity estimated with the stations (started from the initialiser instead, the IMU
+    clock): the light-only solution is refined by a second optimisation with IMU factors
+    (``options.imu_factor_kind``: GTSAM's combined factors,
+    :mod:`lhgraph.estimation.graph.combined_imu`, or the twist factors,
+    :mod:`lhgraph.estimation.inertial`), the IMU biases and the world's gravity estimated
+    with the stations; with ``imu_factors = "auto"``, combined factors that raise the light's
+    median angle residual more than ``IMU_DISAGREEMENT`` times (the real Crazyflie LH1 log:
+    37 -> 257 urad, its deck's accelerometer misfits ~10x its readings' noise) are replaced
+    by the twist factors, whose noise follows the misfit (a warning says so). Started from
+    the initialiser instead, the IMU
     factors hold states in their mirror poses: on the Crazyflie log that solve did not
     converge in 60 iterations). With ``options.rest_keep_every`` > 1 the board's rests are
     thinned first (:func:`~lhgraph.estimation.rests.thin_rests`; the hits left out are
@@ -109,14 +119,30 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
         refined = Initialisation(ev.station_poses().copy(), ev.board_poses().copy(),
                                  ev.board_twists().copy())
-        if progress:
-            progress(f"refining with the IMU: gyro and accelerometer factors at "
-                     f"{int(inertial.rate_ok.sum())} states")
-        light = fit
+        light, light_ev = fit, ev
         light_median = _median_residual(ev, light.values)
-        fit, ev, cov = _optimise(problem, options, refined, progress, inertial,
-                                 initial_gravity(inertial, refined.X), ev)
+        gravity = initial_gravity(inertial, refined.X)
+        kind = options.imu_factor_kind
+        if progress:
+            progress(f"refining with the IMU: {IMU_FACTOR_NAMES[kind]} at "
+                     f"{int(inertial.rate_ok.sum())} states")
+        fit, ev, cov = _optimise(problem, options, refined, progress, inertial, gravity,
+                                 light_ev)
         imu_median = _median_residual(ev, fit.values)
+        if (kind == "combined" and options.imu_factors == "auto"
+                and imu_median > IMU_DISAGREEMENT * light_median):
+            notes.append(f"GTSAM's combined IMU factors disagree with the light (they raised "
+                         f"the median angle residual from {light_median * 1e6:.0f} to "
+                         f"{imu_median * 1e6:.0f} urad): refined with the twist factors "
+                         "instead, whose noise is the stream's misfit, not its readings'")
+            if progress:
+                progress(notes[-1])
+            options = replace(options, imu_factors="twist")
+            light = replace(light, iterations=light.iterations + fit.iterations,
+                            error_history=light.error_history + fit.error_history)
+            fit, ev, cov = _optimise(problem, options, refined, progress, inertial, gravity,
+                                     light_ev)
+            imu_median = _median_residual(ev, fit.values)
         if imu_median > IMU_DISAGREEMENT * light_median:
             notes.append(f"the IMU disagrees with the light: its factors raised the median "
                          f"angle residual from {light_median * 1e6:.0f} to "
