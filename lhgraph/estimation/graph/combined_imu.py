@@ -109,26 +109,31 @@ def preintegrate(stream: ImuStream, state_time: Array, options: GraphOptions) ->
     t0, t1 = state_time[:-1], state_time[1:]
     first = np.searchsorted(t, t0, side="right") - 1  # the last sample at or before t0
     last = np.searchsorted(t, t1, side="left")  # the first sample at or after t1
-    covered = (t1 > t0) & (t0 >= t[0]) & (t1 <= t[-1])
+    inside = (t1 > t0) & (t0 >= t[0]) & (t1 <= t[-1])
+    too_long = np.r_[0, np.cumsum(np.diff(t) > options.imu_max_gap_s)]
+    covered = inside & (too_long[np.clip(last, 0, len(t) - 1)]
+                        == too_long[np.clip(first, 0, len(t) - 1)])
+    # every piece between consecutive state times and sample edges, its step and its sample
+    cuts = np.union1d(state_time[np.r_[covered, False] | np.r_[False, covered]],
+                      edges[(edges > state_time[0]) & (edges < state_time[-1])])
+    middle = 0.5 * (cuts[1:] + cuts[:-1])
+    step = np.searchsorted(state_time, middle, side="right") - 1
+    keep = covered[np.clip(step, 0, len(covered) - 1)] & (step < len(covered))
+    dt, step, sample = np.diff(cuts)[keep], step[keep], np.searchsorted(edges, middle[keep])
+    gyro = stream.gyro_rad_s[sample]
+    # GTSAM turns a piece's specific force into the frame at the piece's start; the
+    # reading is the frame's at its middle, half a piece of turn later
+    accel = np.einsum("kij,kj->ki", so3_exp(gyro * (dt / 2)[:, None]),
+                      stream.accel_mps2[sample])
     params = noise_params(stream, options)
-    measurements = []
     zero = gtsam.imuBias.ConstantBias()
-    for k in np.flatnonzero(covered).tolist():
-        if np.max(np.diff(t[first[k]:last[k] + 1]), initial=0.0) > options.imu_max_gap_s:
-            covered[k] = False
-            continue
-        inner = edges[first[k]:last[k]]
-        cuts = np.concatenate([[t0[k]], inner[(inner > t0[k]) & (inner < t1[k])], [t1[k]]])
-        nearest = np.searchsorted(edges, 0.5 * (cuts[1:] + cuts[:-1]))
-        dt = np.diff(cuts)
-        gyro = stream.gyro_rad_s[nearest]
-        # GTSAM turns a piece's specific force into the frame at the piece's start; the
-        # reading is the frame's at its middle, half a piece of turn later
-        accel = np.einsum("kij,kj->ki", so3_exp(gyro * (dt / 2)[:, None]),
-                          stream.accel_mps2[nearest])
+    bounds = np.searchsorted(step, np.flatnonzero(covered))
+    ends = np.r_[bounds[1:], len(step)]
+    measurements = []
+    for start, end in zip(bounds.tolist(), ends.tolist(), strict=True):
         pim = gtsam.PreintegratedCombinedMeasurements(params, zero)
-        for a, g, h in zip(accel, gyro, dt.tolist(), strict=True):
-            pim.integrateMeasurement(a, g, h)
+        for i in range(start, end):
+            pim.integrateMeasurement(accel[i], gyro[i], dt[i])
         measurements.append(pim)
     return Preintegration(np.flatnonzero(covered), measurements, params,
                           np.flatnonzero(~covered))
