@@ -70,6 +70,11 @@ VARIANTS = {"light only": (False, GraphOptions()),
             "IMU, scale, offset, frame and position solved": (True, GraphOptions(
                 gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
                 imu_rotation_sigma_rad=0.1, imu_position_sigma_m=0.1)),
+            "IMU, scale and offset from the light, combined factors": (True, GraphOptions(
+                gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02, imu_factors="combined")),
+            "IMU, scale, offset and frame from the light, combined factors": (True, GraphOptions(
+                gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
+                imu_rotation_sigma_rad=0.1, imu_factors="combined")),
             "IMU as read, preintegrated gyro": (True, GraphOptions(gyro_preintegration=True)),
             "IMU, scale, offset and frame solved, preintegrated gyro": (True, GraphOptions(
                 gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,

@@ -120,7 +120,11 @@ class GraphOptions:
     the states' twists with one IMU bias (:mod:`lhgraph.estimation.inertial`: the factors
     that solve the IMU's calibration and take ``gyro_preintegration``); ``"auto"``
     (:attr:`imu_factor_kind`): ``"twist"`` when the calibration is solved or
-    ``gyro_preintegration`` is asked, ``"combined"`` otherwise;
+    ``gyro_preintegration`` is asked, ``"combined"`` otherwise (``"combined"`` with
+    ``gyro_scale_sigma``, ``imu_time_offset_sigma_s`` or ``imu_rotation_sigma_rad`` takes
+    the calibration found from the light-only solution,
+    :mod:`lhgraph.estimation.imu_calibration`; with ``imu_position_sigma_m`` or
+    ``gyro_preintegration`` it is an error);
     ``diode_bias_sigma_rad``: when positive, every station sees every diode on each axis
     with a constant angle bias of this prior spread (variables of the graph,
     :func:`~lhgraph.estimation.graph.variables.diode_bias_family`: the board's geometry
@@ -186,11 +190,11 @@ class GraphOptions:
 
     def __post_init__(self) -> None:
         check_fields(self)
-        if self.imu_factors == "combined" and (self.imu_calibrated or self.gyro_preintegration):
-            raise InputError("GTSAM's combined IMU factors solve no IMU calibration and have "
-                             "their own gyro preintegration: use 'twist' (or 'auto') with "
-                             "gyro_scale_sigma, imu_time_offset_sigma_s, imu_rotation_sigma_rad,"
-                             " imu_position_sigma_m or gyro_preintegration", where="imu_factors")
+        if self.imu_factors == "combined" and (self.imu_position_sigma_m > 0
+                                                or self.gyro_preintegration):
+            raise InputError("GTSAM's combined IMU factors take no lever arm and have their "
+                             "own gyro preintegration: use 'twist' (or 'auto') with "
+                             "imu_position_sigma_m or gyro_preintegration", where="imu_factors")
 
     @property
     def imu_calibrated(self) -> bool:

@@ -29,6 +29,7 @@ from lhgraph.estimation.graph.optimizer import (
 )
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import STATION_POSE, VariableLayout, initial_values
+from lhgraph.estimation.imu_calibration import fit_imu_calibration
 from lhgraph.estimation.inertial import InertialData, inertial_data, initial_gravity
 from lhgraph.estimation.init import Initialiser
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
@@ -114,15 +115,28 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     t1 = time.perf_counter()
     fit, ev, cov = _optimise(problem, resolve_estimates(options, few, False), init, progress)
     notes = []
+    extra = {} if rests is None else {"rest_hits_dropped": float(rests.hits_dropped)}
+    base_extra = set(extra)
     if imu is not None:
         options = resolve_estimates(options, few, True)
-        inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
         refined = Initialisation(ev.station_poses().copy(), ev.board_poses().copy(),
                                  ev.board_twists().copy())
         light, light_ev = fit, ev
         light_median = _median_residual(ev, light.values)
-        gravity = initial_gravity(inertial, refined.X)
         kind = options.imu_factor_kind
+        raw = imu
+        if kind == "combined" and options.imu_calibrated:
+            calibration = fit_imu_calibration(
+                imu, problem.state_time, refined.X, scale=options.gyro_scale_sigma > 0,
+                offset=options.imu_time_offset_sigma_s > 0,
+                rotation=options.imu_rotation_sigma_rad > 0)
+            imu = calibration.apply(imu)
+            extra |= calibration.summary()
+            if progress:
+                progress("the IMU's calibration from the light's angular rates: "
+                         + ", ".join(f"{k} {v:.4g}" for k, v in calibration.summary().items()))
+        inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
+        gravity = initial_gravity(inertial, refined.X)
         if progress:
             progress(f"refining with the IMU: {IMU_FACTOR_NAMES[kind]} at "
                      f"{int(inertial.rate_ok.sum())} states")
@@ -140,6 +154,9 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
             options = replace(options, imu_factors="twist")
             light = replace(light, iterations=light.iterations + fit.iterations,
                             error_history=light.error_history + fit.error_history)
+            inertial = inertial_data(raw, problem.state_time, options.imu_max_gap_s)
+            gravity = initial_gravity(inertial, refined.X)
+            extra = {k: v for k, v in extra.items() if k in base_extra}
             fit, ev, cov = _optimise(problem, options, refined, progress, inertial, gravity,
                                      light_ev)
             imu_median = _median_residual(ev, fit.values)
@@ -153,7 +170,6 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
                       error_history=light.error_history + fit.error_history)
     timings["optimise"] = time.perf_counter() - t1
     ev.evaluate(fit.values)
-    extra = {} if rests is None else {"rest_hits_dropped": float(rests.hits_dropped)}
     return _result(angles, problem, ev, fit, cov, options, timings, t0, init.parents, extra,
                    notes)
 

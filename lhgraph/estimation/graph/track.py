@@ -26,7 +26,7 @@ from functools import partial
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.errors import SolverError
+from lhgraph.errors import InputError, SolverError
 from lhgraph.estimation.graph.factors import build_graph
 from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import LMParams, OptimizerResult, levenberg_marquardt
@@ -253,6 +253,10 @@ def track(board: Board, angles: Angles, stations: Stations,
         init, n_pnp = initial_path(board, angles, problem, T_world_lh, pose_solver)
     inertial = gravity = None
     if imu is not None:
+        if options.imu_factor_kind == "combined" and options.imu_calibrated:
+            raise InputError("the tracker finds no IMU calibration for GTSAM's combined IMU "
+                             "factors (the calibration finds it from a light-only solution): "
+                             "use imu_factors = 'twist' or 'auto'", where="imu_factors")
         inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
         init, gravity = start_with_imu(init, inertial)
     timings = {"initialise": time.perf_counter() - t0}
