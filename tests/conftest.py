@@ -1,4 +1,5 @@
-"""Shared fixtures: paths to the real data beside the repository (tests skip when absent)."""
+"""Shared fixtures: paths to the real data beside the repository (tests skip when absent),
+and simulated captures more than one test file uses."""
 
 from __future__ import annotations
 
@@ -34,3 +35,21 @@ def hive_import(hive_bag: Path, tmp_path_factory: pytest.TempPathFactory):
 
     out = tmp_path_factory.mktemp("hive")
     return import_hive(hive_bag, out), out
+
+
+@pytest.fixture(scope="session")
+def miscalibrated_imu():
+    """An 8 s capture of the default board with an IMU whose gyro reads 0.5 / 0.47 / 0.52 of
+    the rate (the hive tracker's reads ~0.48), whose stamps run 6 ms late and whose frame is
+    turned by 1.54 deg from the board's."""
+    import dataclasses
+
+    from lhgraph.sim.imu import ImuConfig
+    from lhgraph.sim.simulate import load_simulation_config, simulate
+
+    config = dataclasses.replace(
+        load_simulation_config(REPO / "configs/simulation/default.toml"),
+        imu=ImuConfig(gyro_scale_x=0.5, gyro_scale_y=0.47, gyro_scale_z=0.52,
+                      time_offset_s=0.006, rotation_x_rad=0.02, rotation_y_rad=-0.015,
+                      rotation_z_rad=0.01))
+    return simulate(config, 1)

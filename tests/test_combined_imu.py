@@ -197,25 +197,13 @@ def test_an_imu_that_misfits_the_light_falls_back_to_the_twist_factors():
     assert "imu_chi2_rotation" in kept.diagnostics
 
 
-@pytest.fixture(scope="module")
-def miscalibrated():
-    """An 8 s capture of the default board whose gyro reads 0.5 / 0.47 / 0.52 of the rate,
-    stamped 6 ms late, its frame turned by 1.54 deg from the board's."""
-    config = dataclasses.replace(
-        load_simulation_config("configs/simulation/default.toml"),
-        imu=ImuConfig(gyro_scale_x=0.5, gyro_scale_y=0.47, gyro_scale_z=0.52,
-                      time_offset_s=0.006, rotation_x_rad=0.02, rotation_y_rad=-0.015,
-                      rotation_z_rad=0.01))
-    return simulate(config, 1)
-
-
-def test_imu_calibration_from_the_true_poses(miscalibrated):
+def test_imu_calibration_from_the_true_poses(miscalibrated_imu):
     # from the true path, the window fit finds the scales within 0.005, the offset within
     # 1 ms and the frame within 0.2 deg; applied, the stream reads the board's rates
     from lhgraph.estimation.imu_calibration import fit_imu_calibration
     from lhgraph.geometry.transforms import rotation_angle, so3_exp
 
-    sim = miscalibrated
+    sim = miscalibrated_imu
     times = np.arange(0.2, 7.8, 0.008)
     found = fit_imu_calibration(sim.imu.stream, times, sim.trajectory.at(times))
     np.testing.assert_allclose(found.scale, [0.5, 0.47, 0.52], atol=0.005)
@@ -231,14 +219,14 @@ def test_imu_calibration_from_the_true_poses(miscalibrated):
     np.testing.assert_allclose(fixed.time, sim.imu.stream.time - found.time_offset_s)
 
 
-def test_combined_factors_with_the_calibration_from_the_light(miscalibrated):
+def test_combined_factors_with_the_calibration_from_the_light(miscalibrated_imu):
     # asked to solve the calibration, the combined factors take it from the light-only
     # solution: station 1 as close as with the twist factors that solve it in the graph
     # (measured 0.43 against 0.39 mm, light alone 0.32), the calibration in the diagnostics;
     # the tracker, with no light-only stage, refuses that combination in one line
     from lhgraph.estimation.graph.track import track
 
-    sim = miscalibrated
+    sim = miscalibrated_imu
     models = {k: s.model for k, s in sim.truth.stations.items()}
     asked = dict(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
                  imu_rotation_sigma_rad=0.1)

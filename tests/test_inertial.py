@@ -248,21 +248,6 @@ def test_real_crazyflie_imu_fits_the_light(tmp_path):
     assert abs(d["gravity_mps2"] - 9.80665) < 1.0
 
 
-@pytest.fixture(scope="module")
-def miscalibrated_imu():
-    """An 8 s capture of the default board with an IMU whose gyro reads 0.5 / 0.47 / 0.52 of
-    the rate (the hive tracker's reads ~0.48), whose stamps run 6 ms late and whose frame is
-    turned by 1.6 deg from the board's."""
-    from lhgraph.sim.imu import ImuConfig
-
-    config = dataclasses.replace(
-        load_simulation_config("configs/simulation/default.toml"),
-        imu=ImuConfig(gyro_scale_x=0.5, gyro_scale_y=0.47, gyro_scale_z=0.52,
-                      time_offset_s=0.006, rotation_x_rad=0.02, rotation_y_rad=-0.015,
-                      rotation_z_rad=0.01))
-    return simulate(config, 1)
-
-
 def test_gyro_scale_and_time_offset_are_solved(miscalibrated_imu):
     # solved with the IMU calibration: the scales within 2 %, the offset within 2 ms (it
     # comes out 1.5-1.7 ms low over these 8 s, with either accelerometer noise estimate), and
