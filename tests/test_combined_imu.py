@@ -175,6 +175,12 @@ def test_deck_with_a_hole_in_the_imu_solves(short_deck):
     errors = [station_errors(short_deck.truth, r.stations)[0].position_norm_m
               for r in (light, result)]
     assert errors[1] < max(errors[0], 2e-3), errors
+    # the IMU calibration from the light's rotations is refused on few-diode data
+    from lhgraph.errors import SolverError
+
+    with pytest.raises(SolverError, match="few-diode"):
+        solve_graph(short_deck.board, short_deck.angles, models,
+                    GraphOptions(imu_factors="combined", gyro_scale_sigma=0.1), imu=holed)
 
 
 def test_an_imu_that_misfits_the_light_falls_back_to_the_twist_factors():

@@ -126,6 +126,12 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         kind = options.imu_factor_kind
         raw = imu
         if kind == "combined" and options.imu_calibrated:
+            if few:
+                raise SolverError(
+                    "the IMU's calibration for the combined IMU factors comes from the "
+                    "light's rotations, which a few-diode receiver's sweeps determine too "
+                    "weakly (the real Crazyflie log: gyro scales 0.50 / 0.82 / 0.65, the "
+                    "frame 16 deg off): use imu_factors = 'twist' or 'auto'")
             calibration = fit_imu_calibration(
                 imu, problem.state_time, refined.X, scale=options.gyro_scale_sigma > 0,
                 offset=options.imu_time_offset_sigma_s > 0,
