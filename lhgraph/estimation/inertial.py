@@ -56,6 +56,14 @@ Crazyflie log it pulls the gravity's magnitude to 10.9 m/s^2 over a 15 s track a
 measure (b) from 10.0 to 10.4 mm; 4 keeps that log where the fixed 0.5 m/s^2 had it (0.46)."""
 
 
+def gravity_magnitude_residual(g: Array) -> tuple[Array, Array]:
+    """The gravity-magnitude factor's residual ``|g| - STANDARD_GRAVITY_MPS2`` (1,) of the
+    gravity vector ``g`` (3,; m/s^2, world) and its Jacobian (1, 3): with the magnitude
+    known, an accelerometer bias along the mean up separates from it."""
+    norm = float(np.linalg.norm(g))
+    return np.array([norm - STANDARD_GRAVITY_MPS2]), (g / max(norm, 1e-9))[None]
+
+
 def reading_noise(x: Array) -> Array:
     """White-noise standard deviation per column of a sampled signal ``x`` (N, d), from its
     second differences (``e_k-1 - 2 e_k + e_k+1`` has variance ``6 sigma^2``; a smooth

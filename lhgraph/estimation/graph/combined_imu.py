@@ -22,8 +22,14 @@ and more) and one factor on the gravity's magnitude (the only callback: the norm
 standard gravity, :data:`~lhgraph.estimation.inertial.GRAVITY_SIGMA_MPS2`) complete it.
 
 The IMU is at the board origin in the board frame (``imu.csv``'s convention); its
-calibration (gyro scale, time offset, frame) is not a variable of these factors: a graph
-that solves it uses the twist factors (:mod:`lhgraph.estimation.graph.imu_terms`).
+calibration (gyro scale, time offset, frame) is not a variable of these factors: the twist
+factors (:mod:`lhgraph.estimation.graph.imu_terms`) solve it in the graph, and for these
+:func:`~lhgraph.estimation.graph.solver.solve_graph` finds it from the light-only solution
+(:mod:`lhgraph.estimation.imu_calibration`) and corrects the stream.
+
+The specific force's half turn: under a held body-frame reading, the nav-frame force over a
+piece is ``R(start) Exp(omega (tau - start)) f``, on average the turn to the piece's middle;
+GTSAM takes it in the start's frame, so the reading is turned by ``Exp(omega dt / 2)``.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
+from lhgraph.errors import InputError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import (
     BOARD_POSE,
@@ -42,7 +49,12 @@ from lhgraph.estimation.graph.variables import (
     IMU_VELOCITY,
     VariableLayout,
 )
-from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, reading_noise
+from lhgraph.estimation.inertial import (
+    GRAVITY_SIGMA_MPS2,
+    gravity_magnitude_residual,
+    gyro_reading_sigma,
+    reading_noise,
+)
 from lhgraph.geometry.transforms import so3_exp
 from lhgraph.io.imu import STANDARD_GRAVITY_MPS2, ImuStream
 
@@ -66,11 +78,10 @@ covariance, the position's error beyond the accelerometer's)."""
 class Preintegration:
     """The steps of a problem's board states with IMU factors: ``steps`` (n,) the k of
     each k -> k + 1 the stream covers, ``measurements`` their preintegrated readings in the
-    same order, ``params`` the noise they were made with; ``gaps`` the other steps."""
+    same order; ``gaps`` the other steps."""
 
     steps: NDArray[np.int64]
     measurements: list[gtsam.PreintegratedCombinedMeasurements]
-    params: gtsam.PreintegrationCombinedParams
     gaps: NDArray[np.int64]
 
 
@@ -80,7 +91,7 @@ def noise_params(stream: ImuStream, options: GraphOptions) -> gtsam.Preintegrati
     ``options.imu_noise_factor``, the bias walks of ``options``; gravity is a variable of
     the factors, not of these parameters."""
     period = float(np.median(np.diff(stream.time)))
-    gyro = max(float(np.max(reading_noise(stream.gyro_rad_s))), options.min_gyro_sigma_rad_s)
+    gyro = max(gyro_reading_sigma(stream), options.min_gyro_sigma_rad_s)
     accel = max(float(np.max(reading_noise(stream.accel_mps2))), options.min_accel_sigma_mps2)
     p = gtsam.PreintegrationCombinedParams.MakeSharedU(STANDARD_GRAVITY_MPS2)
     scale2 = options.imu_noise_factor**2 * period
@@ -127,31 +138,26 @@ def preintegrate(stream: ImuStream, state_time: Array, options: GraphOptions) ->
                       stream.accel_mps2[sample])
     params = noise_params(stream, options)
     zero = gtsam.imuBias.ConstantBias()
-    bounds = np.searchsorted(step, np.flatnonzero(covered))
-    ends = np.r_[bounds[1:], len(step)]
+    bounds = np.searchsorted(step, np.flatnonzero(covered)).tolist()
     measurements = []
-    for start, end in zip(bounds.tolist(), ends.tolist(), strict=True):
+    ends = bounds[1:] + [len(step)] if bounds else []
+    for start, end in zip(bounds, ends, strict=True):
         pim = gtsam.PreintegratedCombinedMeasurements(params, zero)
         for i in range(start, end):
             pim.integrateMeasurement(accel[i], gyro[i], dt[i])
         measurements.append(pim)
-    return Preintegration(np.flatnonzero(covered), measurements, params,
-                          np.flatnonzero(~covered))
+    return Preintegration(np.flatnonzero(covered), measurements, np.flatnonzero(~covered))
 
 
-def gravity_magnitude_factor() -> gtsam.CustomFactor:
-    """The factor holding the gravity vector's norm near standard gravity (noise
-    :data:`~lhgraph.estimation.inertial.GRAVITY_SIGMA_MPS2`)."""
-
-    def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
-        n = values.atVector(GRAVITY.key(0))
-        norm = float(np.linalg.norm(n))
-        if H is not None:
-            H[0] = (n / norm)[None, :]
-        return np.array([norm - STANDARD_GRAVITY_MPS2])
-
-    return gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(1, GRAVITY_SIGMA_MPS2),
-                              [GRAVITY.key(0)], error)
+def gravity_magnitude_error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None
+                            ) -> Array:
+    """Callback of the factor holding the gravity vector's norm near standard gravity
+    (:func:`~lhgraph.estimation.inertial.gravity_magnitude_residual`), for both kinds of IMU
+    factors."""
+    r, J = gravity_magnitude_residual(values.atVector(GRAVITY.key(0)))
+    if H is not None:
+        H[0] = J
+    return r
 
 
 def combined_imu_factors(pre: Preintegration, state_time: Array, options: GraphOptions
@@ -180,7 +186,8 @@ def combined_imu_factors(pre: Preintegration, state_time: Array, options: GraphO
         graph.add(gtsam.PriorFactorVector(v(k), np.zeros(3), free))
     graph.add(gtsam.PriorFactorConstantBias(b(0), zero,
                                             gtsam.noiseModel.Diagonal.Sigmas(BIAS_PRIOR_SIGMAS)))
-    graph.add(gravity_magnitude_factor())
+    graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(1, GRAVITY_SIGMA_MPS2),
+                                 [GRAVITY.key(0)], gravity_magnitude_error))
     return graph
 
 
@@ -192,6 +199,12 @@ class CombinedImu:
     def __init__(self, stream: ImuStream, state_time: Array, layout: VariableLayout,
                  options: GraphOptions):
         self.preintegration = preintegrate(stream, state_time, options)
+        if not len(self.preintegration.steps):
+            raise InputError(
+                f"the IMU stream covers no step between board states (its samples "
+                f"{stream.time[0]:.3f}-{stream.time[-1]:.3f} s, longest gap "
+                f"{np.max(np.diff(stream.time), initial=0.0) * 1e3:.0f} ms against "
+                f"imu_max_gap_s = {options.imu_max_gap_s * 1e3:.0f} ms)", "imu")
         self.graph = combined_imu_factors(self.preintegration, state_time, options)
         self.layout = layout
 

@@ -38,7 +38,6 @@ from lhgraph.estimation.residuals import (
     motion_residuals,
     wnoa_covariance,
 )
-from lhgraph.io.imu import STANDARD_GRAVITY_MPS2
 
 Array = NDArray[np.float64]
 SCALE_SIGMA_M2 = 1e-6
@@ -278,18 +277,6 @@ class FactorEvaluator:
         return self._callback((k, k + 1), k, lambda: self.imu.a_scaled,
                               lambda: self.imu.Ha_scaled)
 
-    def gravity_error(self) -> FactorError:
-        """Callback of the gravity-magnitude factor: ``|g| - STANDARD_GRAVITY_MPS2`` (m/s^2); with
-        the magnitude known, the accelerometer bias along the mean up separates from it."""
-        def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
-            g = values.atVector(GRAVITY.key(0))
-            norm = float(np.linalg.norm(g))
-            if H is not None:
-                H[0] = (g / max(norm, 1e-9))[None]
-            return np.array([norm - STANDARD_GRAVITY_MPS2])
-
-        return error
-
     def imu_bias(self) -> Array | None:
         """The IMU bias ``[gyro (rad/s), accelerometer (m/s^2)]`` (6,) now (None without IMU
         factors; with the combined factors the states' mean)."""
@@ -298,7 +285,8 @@ class FactorEvaluator:
         return None if self.imu is None else self.imu.imu[:6].copy()
 
     def gravity(self) -> Array | None:
-        """The gravity vector (m/s^2, world) now (None without IMU factors)."""
+        """The gravity vector (m/s^2, world) at the evaluated point (None without IMU
+        factors; like every read, valid after :meth:`evaluate`)."""
         if self.combined is not None:
             return self._values.atVector(GRAVITY.key(0))
         return None if self.imu is None else self.imu.imu[6:].copy()

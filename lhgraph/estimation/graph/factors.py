@@ -34,7 +34,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.estimation.graph.combined_imu import CombinedImu
+from lhgraph.estimation.graph.combined_imu import CombinedImu, gravity_magnitude_error
 from lhgraph.estimation.graph.evaluator import SCALE_SIGMA_M2, FactorError, FactorEvaluator
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
@@ -195,5 +195,5 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
                 gtsam.noiseModel.Diagonal.Sigmas(ev.imu.calibration_sigmas)))
         graph.add(gtsam.CustomFactor(
             gtsam.noiseModel.Isotropic.Sigma(1, GRAVITY_SIGMA_MPS2), [GRAVITY.key(0)],
-            ev.gravity_error()))
+            gravity_magnitude_error))
     return graph, ev

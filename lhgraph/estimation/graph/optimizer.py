@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.variables import BOARD_POSE, BOARD_TWIST, VariableLayout
+from lhgraph.estimation.graph.variables import BOARD_POSE, VariableLayout
 
 Array = NDArray[np.float64]
 Progress = Callable[[str], None]
@@ -170,8 +170,9 @@ class _Damping:
 
 def limit_board_steps(delta: gtsam.VectorValues, layout: VariableLayout, max_rad: float,
                       max_m: float) -> bool:
-    """Scale down, in place in ``delta``, every board state's step (pose and twist together)
-    whose rotation exceeds ``max_rad`` or translation ``max_m`` to those limits: a trust
+    """Scale down, in place in ``delta``, every board state's step (all its variables
+    together: pose, twist and, with GTSAM's combined IMU factors, velocity and IMU bias)
+    whose pose's rotation exceeds ``max_rad`` or translation ``max_m`` to those limits: a trust
     region per state. A state far from its solution (a mirror pose, a few hits bridged by a
     weak motion prior) otherwise takes a Gauss-Newton step that the linearisation does not
     hold, the step fails, and the damping that rescues it slows every other variable.
@@ -183,7 +184,7 @@ def limit_board_steps(delta: gtsam.VectorValues, layout: VariableLayout, max_rad
     if len(big) == 0:
         return False
     scaled = gtsam.VectorValues()
-    for family in (BOARD_POSE, BOARD_TWIST):
+    for family in (f for f in layout.families if f.elimination == "chain"):
         keys = layout.keys(family)
         for i in big.tolist():
             scaled.insert(keys[i], delta.at(keys[i]) / excess[i])

@@ -53,7 +53,8 @@ FEW_DIODE_STEP_QUANTILE = 0.95
 """The board-step quantile of the stopping rule on few-diode data (GraphOptions)."""
 IMU_DISAGREEMENT = 1.5
 """The IMU refinement warns when it raises the light's median absolute residual by more than
-this factor (on the hive recording with its gyro taken as read, 0.48x the true rate: 47 ->
+this factor (and with ``imu_factors = "auto"`` replaces GTSAM's combined factors that do so
+by the twist factors) (on the hive recording with its gyro taken as read, 0.48x the true rate: 47 ->
 527 urad; a simulated gyro reading 0.5x: 1.28x; consistent simulated IMUs 1.02-1.10x)."""
 
 
@@ -105,6 +106,12 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         if progress and rests.hits_dropped:
             progress(rests.summary())
     angles, options, few = graph_preparation(angles, options, progress, models)
+    if imu is not None and few and options.imu_factor_kind == "combined" \
+            and options.imu_calibrated:
+        raise SolverError("the IMU's calibration for the combined IMU factors comes from the "
+                          "light's rotations, which a few-diode receiver's sweeps determine "
+                          "too weakly (the real Crazyflie log: gyro scales 0.50 / 0.82 / 0.65,"
+                          " the frame 16 deg off): use imu_factors = 'twist' or 'auto'")
     problem = build_problem(board, angles, models, reference)
     if initialiser is None:
         initialiser = FewDiodeInitialiser() if few else PnPKabschInitialiser(imu=imu)
@@ -116,7 +123,6 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     fit, ev, cov = _optimise(problem, resolve_estimates(options, few, False), init, progress)
     notes = []
     extra = {} if rests is None else {"rest_hits_dropped": float(rests.hits_dropped)}
-    base_extra = set(extra)
     if imu is not None:
         options = resolve_estimates(options, few, True)
         refined = Initialisation(ev.station_poses().copy(), ev.board_poses().copy(),
@@ -124,14 +130,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         light, light_ev = fit, ev
         light_median = _median_residual(ev, light.values)
         kind = options.imu_factor_kind
-        raw = imu
         if kind == "combined" and options.imu_calibrated:
-            if few:
-                raise SolverError(
-                    "the IMU's calibration for the combined IMU factors comes from the "
-                    "light's rotations, which a few-diode receiver's sweeps determine too "
-                    "weakly (the real Crazyflie log: gyro scales 0.50 / 0.82 / 0.65, the "
-                    "frame 16 deg off): use imu_factors = 'twist' or 'auto'")
             calibration = fit_imu_calibration(
                 imu, problem.state_time, refined.X, scale=options.gyro_scale_sigma > 0,
                 offset=options.imu_time_offset_sigma_s > 0,
@@ -139,13 +138,12 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
             imu = calibration.apply(imu)
             extra |= calibration.summary()
             if progress:
-                progress("the IMU's calibration from the light's angular rates: "
+                progress("the IMU's calibration from the light's rotations: "
                          + ", ".join(f"{k} {v:.4g}" for k, v in calibration.summary().items()))
         inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
         gravity = initial_gravity(inertial, refined.X)
         if progress:
-            progress(f"refining with the IMU: {IMU_FACTOR_NAMES[kind]} at "
-                     f"{int(inertial.rate_ok.sum())} states")
+            progress(f"refining with the IMU: {IMU_FACTOR_NAMES[kind]}")
         fit, ev, cov = _optimise(problem, options, refined, progress, inertial, gravity,
                                  light_ev)
         imu_median = _median_residual(ev, fit.values)
@@ -160,9 +158,6 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
             options = replace(options, imu_factors="twist")
             light = replace(light, iterations=light.iterations + fit.iterations,
                             error_history=light.error_history + fit.error_history)
-            inertial = inertial_data(raw, problem.state_time, options.imu_max_gap_s)
-            gravity = initial_gravity(inertial, refined.X)
-            extra = {k: v for k, v in extra.items() if k in base_extra}
             fit, ev, cov = _optimise(problem, options, refined, progress, inertial, gravity,
                                      light_ev)
             imu_median = _median_residual(ev, fit.values)

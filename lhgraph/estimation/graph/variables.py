@@ -3,8 +3,8 @@ dimension, meaning) and the :class:`VariableLayout` of one graph (which indices 
 it holds). Every read of a ``gtsam.Values`` or ``gtsam.VectorValues`` by family goes through the
 layout, vectorised (one GTSAM call per family, no per-key Python loop).
 
-Families (GTSAM key symbols are one character; these avoid GTSAM's IMU idiom, where ``v`` is a
-3-D velocity and ``b`` an IMU bias, so both stay free for IMU factors):
+Families (GTSAM key symbols are one character; ``v`` and ``b`` follow GTSAM's IMU idiom, a
+3-D velocity and an IMU bias):
 
 ==============  ======  ===  ============================================================
 family          symbol  dim  meaning
