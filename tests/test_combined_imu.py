@@ -5,9 +5,9 @@ not cover, the variables' layout, the options, and solves with known answers.
 Why the bounds: at the truth, with a 1 kHz stream of the simulated part's white noise and
 a constant bias, each preintegrated factor's whitened rotation and velocity residuals have
 a mean square near 1 (measured 0.92 and 0.96 here, 0.94 and 0.94 over a 120 s deck); its
-position residual is dominated by the integration noise, far below 1. The facing stations with the planar board
-and a 1 kHz IMU (issue #16's family) solve to within 2 mm / 0.05 deg (measured 0.18 mm /
-0.007 deg on seed 1, the gyro bias's norm to 1e-6 rad/s)."""
+position residual is dominated by the integration noise, far below 1. The facing stations
+with the planar board and a 1 kHz IMU (issue #16's family) solve to within 2 mm / 0.05 deg
+(measured 0.18 mm / 0.007 deg on seed 1, the gyro bias's norm to 1e-6 rad/s)."""
 
 from __future__ import annotations
 
