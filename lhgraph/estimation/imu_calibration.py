@@ -25,7 +25,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.estimation.spread import robust_sigma
-from lhgraph.geometry.transforms import rotation_angle, so3_log
+from lhgraph.geometry.kabsch import weighted_kabsch
+from lhgraph.geometry.transforms import nearest_rotation, rotation_angle, so3_log
 from lhgraph.io.imu import ImuStream
 
 Array = NDArray[np.float64]
@@ -65,10 +66,10 @@ class ImuCalibration:
 
 
 def _fit(gyro: Array, omega: Array, scale: bool, rotation: bool
-         ) -> tuple[Array, Array, NDArray[np.bool_], float]:
-    """``M``, ``b`` of ``gyro ~ M omega + b`` over the rates kept, which rates, and the
-    kept residuals' mean square: ``M`` full with ``scale`` and ``rotation``, diagonal with
-    ``scale`` alone, a rotation with ``rotation`` alone, the identity with neither."""
+         ) -> tuple[Array, float]:
+    """``M`` of ``gyro ~ M omega + b`` over the rates kept, and the kept residuals' mean
+    square: ``M`` full with ``scale`` and ``rotation``, diagonal with ``scale`` alone, a
+    rotation with ``rotation`` alone (Kabsch), the identity with neither."""
     keep = np.ones(len(gyro), dtype=bool)
     for _ in range(3):
         A = np.c_[omega[keep], np.ones(keep.sum())]
@@ -81,15 +82,13 @@ def _fit(gyro: Array, omega: Array, scale: bool, rotation: bool
                 s, b[j] = np.linalg.lstsq(A[:, [j, 3]], gyro[keep, j], rcond=None)[0]
                 M[j, j] = s
         elif rotation:
-            b = np.mean(gyro[keep] - omega[keep], axis=0)
-            u, _, vt = np.linalg.svd((gyro[keep] - b).T @ omega[keep])
-            M = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
-            b = np.mean(gyro[keep] - omega[keep] @ M.T, axis=0)
+            T = weighted_kabsch(omega[keep], gyro[keep])
+            M, b = T[:3, :3], T[:3, 3]
         else:
             M, b = np.eye(3), np.mean(gyro[keep] - omega[keep], axis=0)
         e = np.linalg.norm(gyro - omega @ M.T - b, axis=1)
         keep = e <= OUTLIER_SIGMAS * max(robust_sigma(e[keep]), 1e-12)
-    return M, b, keep, float(np.mean(e[keep] ** 2))
+    return M, float(np.mean(e[keep] ** 2))
 
 
 def fit_imu_calibration(stream: ImuStream, state_time: Array, T_world_board: Array,
@@ -123,7 +122,7 @@ def fit_imu_calibration(stream: ImuStream, state_time: Array, T_world_board: Arr
         return mean, omega[inside]
 
     def cost(tau: float) -> float:
-        return _fit(*sampled(tau), scale, rotation)[3]
+        return _fit(*sampled(tau), scale, rotation)[1]
 
     tau = 0.0
     if offset:
@@ -136,6 +135,4 @@ def fit_imu_calibration(stream: ImuStream, state_time: Array, T_world_board: Arr
         tau = float(grid[i] + np.clip(shift, -1, 1) * OFFSET_STEP_S)
     M = _fit(*sampled(tau), scale, rotation)[0]
     s = np.linalg.norm(M, axis=1)  # M = diag(s) R^T: row j is s_j times R's column j
-    u, _, vt = np.linalg.svd(M / s[:, None])
-    Rt = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
-    return ImuCalibration(s, tau, Rt.T)
+    return ImuCalibration(s, tau, nearest_rotation(M / s[:, None]).T)

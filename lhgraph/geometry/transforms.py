@@ -226,6 +226,13 @@ def euler_zyx(R: ArrayLike) -> Array:
     return np.stack([roll, pitch, yaw], axis=-1)
 
 
+def nearest_rotation(M: ArrayLike) -> Array:
+    """The proper rotation (3, 3) nearest to the 3x3 matrix ``M`` in the Frobenius norm (its
+    polar factor, the smallest singular direction flipped when ``M``'s is a reflection)."""
+    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=float).reshape(3, 3))
+    return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+
+
 def rotation_angle(R: ArrayLike) -> Array:
     """Rotation angle (rad) of rotation matrices ``(..., 3, 3)``."""
     R = np.asarray(R, dtype=float)

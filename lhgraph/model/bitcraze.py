@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lhgraph.errors import InputError
-from lhgraph.geometry.transforms import make_pose
+from lhgraph.geometry.transforms import make_pose, nearest_rotation
 from lhgraph.model.station import FactoryCalibration
 
 Array = NDArray[np.float64]
@@ -103,9 +103,7 @@ def pose_from_bitcraze(origin: ArrayLike, rotation: ArrayLike) -> Array:
     """``T_world_lh`` (4x4) of a cfclient geometry: ``origin`` (m), ``rotation`` (station
     frame to world, made orthonormal: cfclient stores float32); the frames agree with ours,
     see the module docstring."""
-    U, _, Vt = np.linalg.svd(np.asarray(rotation, dtype=float).reshape(3, 3))
-    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-    return make_pose(R, np.asarray(origin, dtype=float).reshape(3))
+    return make_pose(nearest_rotation(rotation), np.asarray(origin, dtype=float).reshape(3))
 
 
 def pose_to_bitcraze(T_world_lh: ArrayLike) -> tuple[list[float], list[list[float]]]:

@@ -149,15 +149,20 @@ def preintegrate(stream: ImuStream, state_time: Array, options: GraphOptions) ->
     return Preintegration(np.flatnonzero(covered), measurements, np.flatnonzero(~covered))
 
 
-def gravity_magnitude_error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None
-                            ) -> Array:
-    """Callback of the factor holding the gravity vector's norm near standard gravity
-    (:func:`~lhgraph.estimation.inertial.gravity_magnitude_residual`), for both kinds of IMU
+def gravity_magnitude_factor() -> gtsam.CustomFactor:
+    """The factor holding the gravity vector's norm near standard gravity (noise
+    :data:`~lhgraph.estimation.inertial.GRAVITY_SIGMA_MPS2`;
+    :func:`~lhgraph.estimation.inertial.gravity_magnitude_residual`), for both kinds of IMU
     factors."""
-    r, J = gravity_magnitude_residual(values.atVector(GRAVITY.key(0)))
-    if H is not None:
-        H[0] = J
-    return r
+
+    def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
+        r, J = gravity_magnitude_residual(values.atVector(GRAVITY.key(0)))
+        if H is not None:
+            H[0] = J
+        return r
+
+    return gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(1, GRAVITY_SIGMA_MPS2),
+                              [GRAVITY.key(0)], error)
 
 
 def combined_imu_factors(pre: Preintegration, state_time: Array, options: GraphOptions
@@ -186,8 +191,7 @@ def combined_imu_factors(pre: Preintegration, state_time: Array, options: GraphO
         graph.add(gtsam.PriorFactorVector(v(k), np.zeros(3), free))
     graph.add(gtsam.PriorFactorConstantBias(b(0), zero,
                                             gtsam.noiseModel.Diagonal.Sigmas(BIAS_PRIOR_SIGMAS)))
-    graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(1, GRAVITY_SIGMA_MPS2),
-                                 [GRAVITY.key(0)], gravity_magnitude_error))
+    graph.add(gravity_magnitude_factor())
     return graph
 
 

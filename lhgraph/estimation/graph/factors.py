@@ -34,7 +34,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.estimation.graph.combined_imu import CombinedImu, gravity_magnitude_error
+from lhgraph.estimation.graph.combined_imu import CombinedImu, gravity_magnitude_factor
 from lhgraph.estimation.graph.evaluator import SCALE_SIGMA_M2, FactorError, FactorEvaluator
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
@@ -50,7 +50,7 @@ from lhgraph.estimation.graph.variables import (
     diode_bias_family,
     sensor_offset_family,
 )
-from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, InertialData
+from lhgraph.estimation.inertial import InertialData
 from lhgraph.estimation.problem import GraphProblem
 
 Array = NDArray[np.float64]
@@ -193,7 +193,5 @@ def build_graph(problem: GraphProblem, options: GraphOptions, T_world_lh: Array 
             graph.add(gtsam.PriorFactorVector(
                 IMU_CALIBRATION.key(0), np.zeros(IMU_CALIBRATION.dim),
                 gtsam.noiseModel.Diagonal.Sigmas(ev.imu.calibration_sigmas)))
-        graph.add(gtsam.CustomFactor(
-            gtsam.noiseModel.Isotropic.Sigma(1, GRAVITY_SIGMA_MPS2), [GRAVITY.key(0)],
-            gravity_magnitude_error))
+        graph.add(gravity_magnitude_factor())
     return graph, ev

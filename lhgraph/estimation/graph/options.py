@@ -211,6 +211,13 @@ class GraphOptions:
             return self.imu_factors
         return "twist" if self.imu_calibrated or self.gyro_preintegration else "combined"
 
+    @property
+    def imu_calibration_from_light(self) -> bool:
+        """Whether the IMU's calibration is found from the light-only solution
+        (:mod:`lhgraph.estimation.imu_calibration`): asked for with GTSAM's combined factors,
+        which cannot solve it."""
+        return self.imu_factor_kind == "combined" and self.imu_calibrated
+
     def accel_start_sigma(self, imu: ImuStream) -> float:
         """The accelerometer factors' noise (m/s^2) to start from with the stream ``imu``:
         with ``adapt_accel_sigma`` its :func:`~lhgraph.estimation.inertial.accel_factor_sigma`

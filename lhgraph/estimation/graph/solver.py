@@ -56,9 +56,10 @@ FEW_DIODE_STEP_QUANTILE = 0.95
 """The board-step quantile of the stopping rule on few-diode data (GraphOptions)."""
 IMU_DISAGREEMENT = 1.5
 """The IMU refinement warns when it raises the light's median absolute residual by more than
-this factor (and with ``imu_factors = "auto"`` replaces GTSAM's combined factors that do so
-by the twist factors) (on the hive recording with its gyro taken as read, 0.48x the true rate: 47 ->
-527 urad; a simulated gyro reading 0.5x: 1.28x; consistent simulated IMUs 1.02-1.10x)."""
+this factor, and with ``imu_factors = "auto"`` replaces GTSAM's combined factors that do
+so by the twist factors (on the hive recording with its gyro taken as read, 0.48x the true
+rate: 47 -> 527 urad; a simulated gyro reading 0.5x: 1.28x; consistent simulated IMUs
+1.02-1.10x)."""
 
 
 DISAGREEMENT_STEPS = 2
@@ -114,8 +115,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         if progress and rests.hits_dropped:
             progress(rests.summary())
     angles, options, few = graph_preparation(angles, options, progress, models)
-    if imu is not None and few and options.imu_factor_kind == "combined" \
-            and options.imu_calibrated:
+    if imu is not None and few and options.imu_calibration_from_light:
         raise SolverError("the IMU's calibration for the combined IMU factors comes from the "
                           "light's rotations, which a few-diode receiver's sweeps determine "
                           "too weakly (the real Crazyflie log: gyro scales 0.50 / 0.82 / 0.65,"
@@ -138,7 +138,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         light, light_ev = fit, ev
         light_median = _median_residual(ev, light.values)
         kind = options.imu_factor_kind
-        if kind == "combined" and options.imu_calibrated:
+        if options.imu_calibration_from_light:
             calibration = fit_imu_calibration(
                 imu, problem.state_time, refined.X, scale=options.gyro_scale_sigma > 0,
                 offset=options.imu_time_offset_sigma_s > 0,
@@ -174,7 +174,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
             fit, ev, cov = _optimise(problem, options, refined, progress, inertial, gravity,
                                      light_ev)
             imu_median = _median_residual(ev, fit.values)
-        if imu_median > IMU_DISAGREEMENT * light_median:
+        if imu_median > limit:
             notes.append(f"the IMU disagrees with the light: its factors raised the median "
                          f"angle residual from {light_median * 1e6:.0f} to "
                          f"{imu_median * 1e6:.0f} urad (a gyro scale error or time offset? "

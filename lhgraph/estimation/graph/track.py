@@ -253,7 +253,7 @@ def track(board: Board, angles: Angles, stations: Stations,
         init, n_pnp = initial_path(board, angles, problem, T_world_lh, pose_solver)
     inertial = gravity = None
     if imu is not None:
-        if options.imu_factor_kind == "combined" and options.imu_calibrated:
+        if options.imu_calibration_from_light:
             raise InputError("the tracker finds no IMU calibration for GTSAM's combined IMU "
                              "factors (the calibration finds it from a light-only solution): "
                              "use imu_factors = 'twist' or 'auto'", where="imu_factors")
