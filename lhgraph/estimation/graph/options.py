@@ -54,9 +54,10 @@ class GraphOptions:
     two sweeps together (the Crazyflie deck) at their sweep times
     (:mod:`lhgraph.estimation.sweep_times`), ``"stamped"`` takes every stamp as the hit time;
     ``board_step_quantile``: the board-step test of the stopping rule applies to this quantile
-    of the states' steps (1 = every state; None = 1, or ``FEW_DIODE_STEP_QUANTILE`` for
-    few-diode data, whose states seen by one station only can sit in a mirror pose that
-    turns for dozens of iterations without moving the stations); ``few_diode_sigma_rad``: the
+    of the states' steps (1 = every state; None = 1, or on few-diode data, whose states seen
+    by one station only can sit in a mirror pose that turns for dozens of iterations without
+    moving the stations, the median when calibrating and 0.95 when tracking:
+    ``FEW_DIODE_STEP_QUANTILE``, ``FEW_DIODE_TRACK_STEP_QUANTILE``); ``few_diode_sigma_rad``: the
     floor of the angle noise on few-diode data instead of ``angle_sigma_rad`` (a real LH1
     station's noise, SPEC §3; with ~7 hits per state, the state's pose and offset absorb
     much of the residual, so their spread underestimates the noise);

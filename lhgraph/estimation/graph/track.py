@@ -31,7 +31,11 @@ from lhgraph.estimation.graph.factors import build_graph
 from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import LMParams, OptimizerResult, levenberg_marquardt
 from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.solver import graph_preparation, resolve_estimates
+from lhgraph.estimation.graph.solver import (
+    FEW_DIODE_TRACK_STEP_QUANTILE,
+    graph_preparation,
+    resolve_estimates,
+)
 from lhgraph.estimation.graph.variables import BOARD_POSE, initial_values
 from lhgraph.estimation.inertial import inertial_data, start_with_imu
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
@@ -242,7 +246,8 @@ def track(board: Board, angles: Angles, stations: Stations,
     t0 = time.perf_counter()
     angles, options, few = graph_preparation(
         angles, options, progress, models or {k: stations.stations[k].model
-                                              for k in stations.indices()})
+                                              for k in stations.indices()},
+        FEW_DIODE_TRACK_STEP_QUANTILE)
     options = resolve_estimates(options, few, imu is not None)
     problem, T_world_lh = tracking_problem(board, angles, stations, models)
     if few:

@@ -51,9 +51,10 @@ class VariableFamily:
 
     ``symbol``: the GTSAM key character (key = ``gtsam.symbol(symbol, index)``); ``dim``: tangent
     dimension; ``is_pose``: a ``Pose3`` (else a vector of ``dim``); ``elimination``: where its
-    variables go in the elimination order (``"leaf"``: first, each touches one state's factors
-    only; ``"chain"``: per board state, in time order; ``"root"``: last, shared by the whole
-    capture, so their marginals are read off the root clique); ``relinearize_threshold``: iSAM2
+    variables go in the elimination order (``"leaf"``: with its board state, after the chain
+    families, each touches that state's factors only; ``"chain"``: per board state, in time
+    order; ``"root"``: last, shared by the whole capture, so their marginals are read off the
+    root clique); ``relinearize_threshold``: iSAM2
     relinearises a variable whose step exceeds this (tangent units; 0.1 is GTSAM's default, 1.0
     for variables the factors are nearly linear in); ``is_bias``: a
     ``gtsam.imuBias.ConstantBias`` (its vector: accelerometer, then gyro)."""
@@ -201,11 +202,13 @@ class VariableLayout:
         return self._keys[family]
 
     def elimination_ordering(self) -> gtsam.Ordering:
-        """Leaf families first (the sweep offsets), then the chain families state by state
-        (board pose, twist), the root families last (the stations): the stations sit in the
-        root clique, so their marginal covariances come with the last iteration's Bayes tree
-        for free.
+        """The chain families state by state (board pose, twist), each state followed by its
+        leaf variables (its sweep offset), the root families last (the stations): the
+        stations sit in the root clique, so their marginal covariances come with the last
+        iteration's Bayes tree for free. Leaf variables of no state go first.
 
+        A state's leaves eliminated with it share its clique: on the real Crazyflie LH1 log
+        (3739 states) 3739 cliques instead of 7466 and 64 ms instead of 74 per elimination.
         The states go in time order when the graph has no root variables (tracking: the chain
         eliminates without fill-in), else in the nested-dissection order of the chain
         (:func:`chain_dissection`): eliminated in time order, every state's clique would hold
@@ -214,15 +217,21 @@ class VariableLayout:
         ordering = gtsam.Ordering()
         by_stage = {stage: [f for f in self._indices if f.elimination == stage]
                     for stage in ("leaf", "chain", "root")}
+        chain = by_stage["chain"]
+        states = self._indices[chain[0]] if chain else range(0)
+        leaves: dict[int, list[int]] = {}
         for family in by_stage["leaf"]:
-            for key in self._keys[family]:
-                ordering.push_back(key)
-        chain = [self._keys[f] for f in by_stage["chain"]]
-        n_states = len(chain[0]) if chain else 0
+            for index, key in zip(self._indices[family], self._keys[family], strict=True):
+                if index in states:
+                    leaves.setdefault(index, []).append(key)
+                else:
+                    ordering.push_back(key)
         has_root = any(self._keys[f] for f in by_stage["root"])
-        for state in chain_dissection(n_states) if has_root else range(n_states):
-            for keys in chain:
-                ordering.push_back(keys[state])
+        for state in chain_dissection(len(states)) if has_root else range(len(states)):
+            for family in chain:
+                ordering.push_back(self._keys[family][state])
+            for key in leaves.get(states[state], []):
+                ordering.push_back(key)
         for family in by_stage["root"]:
             for key in self._keys[family]:
                 ordering.push_back(key)
