@@ -308,7 +308,7 @@ def test_motion_prior_redundancy_against_the_dense_hat_matrix():
     A_m = A[rows]
     exact = len(rows) - np.trace(A_m @ np.linalg.solve(A.T @ A, A_m.T))
     [(n, dof)] = redundancy(lin, [ev.motion_factors], ev.layout.elimination_ordering(),
-                            values.dims(), probes=16)
+                            probes=16)
     assert n == len(rows) == 12 * len(ev.motion_factors)
     assert 0 < exact < n
     assert dof == pytest.approx(exact, rel=0.15)

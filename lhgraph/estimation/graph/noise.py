@@ -41,10 +41,9 @@ update acts only when the ratio leaves (0.8, 1.25) (the redundancy's spread per 
 
 
 def redundancy(lin: gtsam.GaussianFactorGraph, groups: list[range], ordering: gtsam.Ordering,
-               dims: dict[int, int], probes: int = REDUNDANCY_PROBES, seed: int = 0
-               ) -> list[tuple[int, float]]:
+               probes: int = REDUNDANCY_PROBES, seed: int = 0) -> list[tuple[int, float]]:
     """Per group of linear factors (``groups``: index ranges) of the whitened least-squares
-    system ``lin`` over variables of dimensions ``dims`` (key: dim): its rows ``n`` and
+    system ``lin``: its rows ``n`` and
     redundancy ``n - trace(H)`` (``H = A_g N^-1 A_g^T`` the group's block of the hat matrix,
     ``N = A^T A``): the degrees of freedom the fit leaves their residuals, so that
     ``e^T e / redundancy`` estimates their variance factor. The trace by Hutchinson's
@@ -53,7 +52,7 @@ def redundancy(lin: gtsam.GaussianFactorGraph, groups: list[range], ordering: gt
     eliminated sequentially in ``ordering`` (once for every group)."""
     net = lin.eliminateSequential(ordering)
     rng = np.random.default_rng(seed)
-    zero = {key: np.zeros(dim) for key, dim in dims.items()}
+    every_key = lin.gradientAtZero()  # a vector for every variable, made in C++
     out = []
     for factors in groups:
         members = [lin.at(i) for i in factors]
@@ -61,9 +60,7 @@ def redundancy(lin: gtsam.GaussianFactorGraph, groups: list[range], ordering: gt
         bounds = np.r_[0, np.cumsum(rows)]
         traces = []
         for _ in range(probes):
-            g = gtsam.VectorValues()
-            for key, z_key in zero.items():
-                g.insert(key, z_key)
+            g = gtsam.VectorValues.Zero(every_key)
             z = rng.choice([-1.0, 1.0], int(bounds[-1]))
             for f, a, e in zip(members, bounds[:-1], bounds[1:], strict=True):
                 f.transposeMultiplyAdd(1.0, z[a:e], g)
@@ -115,7 +112,7 @@ class NoiseAdaptation:
         redundant = options.motion_prior_estimate == "redundancy"
         groups = self._redundancy_groups()
         if groups and self._redundancy is None:
-            self._redundancy = self._redundancies(linearized(), values.dims(), groups)
+            self._redundancy = self._redundancies(linearized(), groups)
         if "motion" in groups:
             rows, dof = self._redundancy["motion"]
             chi2 *= rows / max(dof, 1.0)
@@ -191,10 +188,10 @@ class NoiseAdaptation:
             groups["accel"] = ev.accel_factors
         return groups
 
-    def _redundancies(self, lin: gtsam.GaussianFactorGraph, dims: dict[int, int],
-                      groups: dict[str, range]) -> dict[str, tuple[int, float]]:
-        """Rows and redundancy of each of ``groups`` in the linearised graph ``lin`` over
-        variables of dimensions ``dims`` (:func:`redundancy`)."""
+    def _redundancies(self, lin: gtsam.GaussianFactorGraph, groups: dict[str, range]
+                      ) -> dict[str, tuple[int, float]]:
+        """Rows and redundancy of each of ``groups`` in the linearised graph ``lin``
+        (:func:`redundancy`)."""
         found = redundancy(lin, list(groups.values()),
-                           self.evaluator.layout.elimination_ordering(), dims)
+                           self.evaluator.layout.elimination_ordering())
         return dict(zip(groups, found, strict=True))
