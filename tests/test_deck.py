@@ -10,7 +10,14 @@ import numpy as np
 import pytest
 
 from lhgraph.errors import InputError, SolverError
-from lhgraph.estimation.graph.solver import few_diode, solve_graph
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.solver import (
+    FEW_DIODE_STEP_QUANTILE,
+    FEW_DIODE_TRACK_STEP_QUANTILE,
+    few_diode,
+    graph_preparation,
+    solve_graph,
+)
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp import board_poses, planar_twins
 from lhgraph.estimation.init.twins import resolve_twins
@@ -19,7 +26,7 @@ from lhgraph.estimation.sweep_times import co_logged_fraction, retime_cycles, ro
 from lhgraph.geometry.transforms import inverse, make_pose, rotation_angle, so3_exp
 from lhgraph.model.boards import crazyflie_deck
 from lhgraph.model.station import ideal_angles
-from lhgraph.sim.config import parse_simulation_config
+from lhgraph.sim.config import SimulationConfig, parse_simulation_config
 from lhgraph.sim.simulate import load_simulation_config, simulate
 
 DECK = Path(__file__).parents[1] / "configs" / "simulation" / "deck.toml"
@@ -43,6 +50,23 @@ def test_deck_log_character(deck_capture):
     fraction = co_logged_fraction(a)
     assert min(fraction.values()) > 0.95
     assert np.all(np.diff(a.time) >= 0)
+
+
+def test_few_diode_stopping_rule_tests_the_median_state_when_calibrating(deck_capture):
+    """Calibrating a deck tests the states' median step (the stations have their own test),
+    tracking it tests 95 % of them (the path is the product); a user's quantile is kept and
+    many-diode data keeps every state."""
+    angles = deck_capture.angles
+    _, calibrating, few = graph_preparation(angles, GraphOptions())
+    assert few and calibrating.board_step_quantile == FEW_DIODE_STEP_QUANTILE == 0.5
+    _, tracking, _ = graph_preparation(angles, GraphOptions(),
+                                       step_quantile=FEW_DIODE_TRACK_STEP_QUANTILE)
+    assert tracking.board_step_quantile == 0.95
+    _, chosen, _ = graph_preparation(angles, GraphOptions(board_step_quantile=0.8))
+    assert chosen.board_step_quantile == 0.8
+    board = simulate(SimulationConfig(duration_s=1.0), seed=1)  # the 32-diode board
+    _, many, few_many = graph_preparation(board.angles, GraphOptions())
+    assert not few_many and many.board_step_quantile is None
 
 
 def test_logging_options_checked():
