@@ -43,13 +43,13 @@ update acts only when the ratio leaves (0.8, 1.25) (the redundancy's spread per 
 def redundancy(lin: gtsam.GaussianFactorGraph, groups: list[range], ordering: gtsam.Ordering,
                probes: int = REDUNDANCY_PROBES, seed: int = 0) -> list[tuple[int, float]]:
     """Per group of linear factors (``groups``: index ranges) of the whitened least-squares
-    system ``lin``: its rows ``n`` and
-    redundancy ``n - trace(H)`` (``H = A_g N^-1 A_g^T`` the group's block of the hat matrix,
-    ``N = A^T A``): the degrees of freedom the fit leaves their residuals, so that
-    ``e^T e / redundancy`` estimates their variance factor. The trace by Hutchinson's
-    estimator over ``probes`` Rademacher vectors ``z`` (seeded: the same number for the same
-    system): ``z^T A_g N^-1 A_g^T z = |R^-T A_g^T z|^2``, with ``N = R^T R`` from ``lin``
-    eliminated sequentially in ``ordering`` (once for every group)."""
+    system ``lin``: its rows ``n`` and redundancy ``n - trace(H)`` (``H = A_g N^-1 A_g^T``
+    the group's block of the hat matrix, ``N = A^T A``): the degrees of freedom the fit
+    leaves their residuals, so that ``e^T e / redundancy`` estimates their variance factor.
+    The trace by Hutchinson's estimator over ``probes`` Rademacher vectors ``z`` (seeded: the
+    same number for the same system): ``z^T A_g N^-1 A_g^T z = |R^-T A_g^T z|^2``, with
+    ``N = R^T R`` from ``lin`` eliminated sequentially in ``ordering`` (once for every
+    group)."""
     net = lin.eliminateSequential(ordering)
     rng = np.random.default_rng(seed)
     every_key = lin.gradientAtZero()  # a vector for every variable, made in C++
