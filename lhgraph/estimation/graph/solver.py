@@ -152,10 +152,11 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
                 offset=options.imu_time_offset_sigma_s > 0,
                 rotation=options.imu_rotation_sigma_rad > 0)
             imu = calibration.apply(imu)
-            extra |= calibration.summary()
+            found = calibration.summary()
+            extra |= found
             if progress:
                 progress("the IMU's calibration from the light's rotations: "
-                         + ", ".join(f"{k} {v:.4g}" for k, v in calibration.summary().items()))
+                         + ", ".join(f"{k} {v:.4g}" for k, v in found.items()))
         inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
         gravity = initial_gravity(inertial, refined.X)
         if progress:

@@ -10,7 +10,13 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
 from lhgraph.geometry.kabsch import weighted_kabsch
-from lhgraph.geometry.transforms import interpolate_poses, make_pose, se3_exp, so3_log
+from lhgraph.geometry.transforms import (
+    interpolate_poses,
+    make_pose,
+    nearest_rotation,
+    se3_exp,
+    so3_log,
+)
 from lhgraph.io.trajectory import Trajectory
 
 Array = NDArray[np.float64]
@@ -65,9 +71,8 @@ def align_to_mocap(path: Trajectory, mocap: Trajectory, max_gap_s: float = 0.05,
         raise SolverError(f"only {len(t)} path poses overlap the mocap recording")
     T_body = interpolate_poses(t_m, T_m, t)
     W0 = weighted_kabsch(T_body[:, :3, 3], T_est[:, :3, 3])
-    U, _, Vt = np.linalg.svd(np.sum(np.swapaxes(W0[:3, :3] @ T_body[:, :3, :3], 1, 2)
-                                    @ T_est[:, :3, :3], axis=0))
-    H0 = make_pose(U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt, np.zeros(3))
+    H0 = make_pose(nearest_rotation(np.sum(np.swapaxes(W0[:3, :3] @ T_body[:, :3, :3], 1, 2)
+                                           @ T_est[:, :3, :3], axis=0)), np.zeros(3))
 
     def unpack(x: Array) -> tuple[Array, Array, float]:
         return se3_exp(x[:6]) @ W0, H0 @ se3_exp(x[6:12]), float(x[12])
