@@ -106,6 +106,7 @@ class FactorEvaluator:
         self._motion_scale = 1.0  # 1/sqrt(s): the motion prior's covariance is s * Q
         self._bearing_scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
         self._jacobians_ready = False
+        self._raw_jacobians = None  # unscaled, at the cached point
         self.imu = None if inertial is None else ImuTerms(inertial, layout, options)
         """The twist IMU factors' residuals (None without them)."""
         self.combined: CombinedImu | None = None
@@ -394,21 +395,26 @@ class FactorEvaluator:
                                        self._dt, False)[0]
         if self.imu is not None:
             self.imu.read(values, self._X, self._W)
+        self._raw_jacobians = None
         self._scale_residuals()
         self._values = values
 
     def _jacobians(self) -> None:
-        """Jacobians at the cached point, computed once, on the first linearising callback
-        (error-only evaluations never need them)."""
+        """Jacobians at the cached point and noise levels, made on the first linearising
+        callback (error-only evaluations never need them): computed once per point, and
+        only rescaled when the noise levels change there."""
         if self._jacobians_ready:
             return
-        _, HX, HW, HL = bearing_residuals(self._hits, self._X, self._W, self._L,
-                                          self.problem.models)
-        self._HX, self._HW, self._HL = (H * self._bearing_scale for H in (HX, HW, HL))
+        if self._raw_jacobians is None:
+            _, HX, HW, HL = bearing_residuals(self._hits, self._X, self._W, self._L,
+                                              self.problem.models)
+            _, He = motion_residuals(self._X[:-1], self._W[:-1], self._X[1:], self._W[1:],
+                                     self._dt)
+            self._raw_jacobians = (HX, HW, HL), He
+        bearing, motion = self._raw_jacobians
+        self._HX, self._HW, self._HL = (H * self._bearing_scale for H in bearing)
         self._offset_jacobian = self._ones * self._bearing_scale
-        _, He = motion_residuals(self._X[:-1], self._W[:-1], self._X[1:], self._W[1:],
-                                 self._dt)
-        self._He = tuple(H * self._motion_scale for H in He)
+        self._He = tuple(H * self._motion_scale for H in motion)
         if self.imu is not None:
             self.imu.jacobians()
         self._jacobians_ready = True

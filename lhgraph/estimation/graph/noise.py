@@ -41,7 +41,8 @@ update acts only when the ratio leaves (0.8, 1.25) (the redundancy's spread per 
 
 
 def redundancy(lin: gtsam.GaussianFactorGraph, groups: list[range], ordering: gtsam.Ordering,
-               probes: int = REDUNDANCY_PROBES, seed: int = 0) -> list[tuple[int, float]]:
+               probes: int = REDUNDANCY_PROBES, seed: int = 0,
+               zero: gtsam.VectorValues | None = None) -> list[tuple[int, float]]:
     """Per group of linear factors (``groups``: index ranges) of the whitened least-squares
     system ``lin``: its rows ``n`` and redundancy ``n - trace(H)`` (``H = A_g N^-1 A_g^T``
     the group's block of the hat matrix, ``N = A^T A``): the degrees of freedom the fit
@@ -49,10 +50,11 @@ def redundancy(lin: gtsam.GaussianFactorGraph, groups: list[range], ordering: gt
     The trace by Hutchinson's estimator over ``probes`` Rademacher vectors ``z`` (seeded: the
     same number for the same system): ``z^T A_g N^-1 A_g^T z = |R^-T A_g^T z|^2``, with
     ``N = R^T R`` from ``lin`` eliminated sequentially in ``ordering`` (once for every
-    group)."""
+    group). ``zero``: a vector for every variable of ``lin`` (any values: only its keys and
+    dimensions count), made from ``lin`` when not given."""
     net = lin.eliminateSequential(ordering)
     rng = np.random.default_rng(seed)
-    every_key = lin.gradientAtZero()  # a vector for every variable, made in C++
+    every_key = lin.gradientAtZero() if zero is None else zero  # made in C++
     out = []
     for factors in groups:
         members = [lin.at(i) for i in factors]
@@ -84,6 +86,7 @@ class NoiseAdaptation:
         self.graph = graph
         self.rounds_left = options.motion_prior_rounds
         self._redundancy: dict[str, tuple[int, float]] | None = None  # at the current levels
+        self._keys: gtsam.VectorValues | None = None  # a vector per variable (the graph's)
 
     @staticmethod
     def enabled(options: GraphOptions) -> bool:
@@ -192,6 +195,8 @@ class NoiseAdaptation:
                       ) -> dict[str, tuple[int, float]]:
         """Rows and redundancy of each of ``groups`` in the linearised graph ``lin``
         (:func:`redundancy`)."""
+        if self._keys is None:
+            self._keys = lin.gradientAtZero()
         found = redundancy(lin, list(groups.values()),
-                           self.evaluator.layout.elimination_ordering())
+                           self.evaluator.layout.elimination_ordering(), zero=self._keys)
         return dict(zip(groups, found, strict=True))
