@@ -225,6 +225,29 @@ def test_numpy_cost_is_the_graph_error(loss):
     assert np.abs(ev.whitened_bearing_residuals()).max() > 3 * options.huber_k
 
 
+def test_rescaled_linearisation_is_the_one_made_at_those_levels():
+    """Linearised, rescaled at the same point (its Jacobians kept and rescaled, not computed
+    again) and linearised again, the graph gives the same linear system as a fresh graph
+    whose levels were set before its first evaluation."""
+    sim = _capture("default", duration_s=1.0, reflection_fraction=0.03)
+    _, graph, ev, values = _graph(sim, GraphOptions())
+    graph.linearize(values)  # the Jacobians at the first levels, kept by the evaluator
+    ev.scale_motion_prior(0.3)
+    ev.scale_bearing_noise(2.0)
+    _, fresh_graph, fresh, _ = _graph(sim, GraphOptions())
+    fresh.scale_motion_prior(0.3)
+    fresh.scale_bearing_noise(2.0)
+    rescaled, made = graph.linearize(values), fresh_graph.linearize(values)
+    assert rescaled.size() == made.size()
+    A, b = rescaled.jacobian()
+    A_made, b_made = made.jacobian()
+    assert np.array_equal(A, A_made) and np.array_equal(b, b_made)
+    # and the levels changed the system: not the first linearisation again
+    ev.scale_motion_prior(1 / 0.3)
+    ev.scale_bearing_noise(0.5)
+    assert not np.allclose(graph.linearize(values).jacobian()[0], A)
+
+
 def test_diode_biases_are_estimated_with_the_stations():
     """Every station sees every diode with its own constant angle bias (100 µrad, as the
     hive recording's per-diode mean residuals): ignored, they move station 1 by millimetres;
