@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from lhgraph.errors import InputError, SolverError
-from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.solver import (
-    FEW_DIODE_STEP_QUANTILE,
-    FEW_DIODE_TRACK_STEP_QUANTILE,
-    few_diode,
-    graph_preparation,
-    solve_graph,
+from lhgraph.estimation.graph.optimizer import LMParams
+from lhgraph.estimation.graph.options import (
+    FEW_DIODE_CALIBRATION,
+    FEW_DIODE_TRACKING,
+    STEP_TOLERANCE_SIGMA,
+    GraphOptions,
 )
+from lhgraph.estimation.graph.solver import few_diode, graph_preparation, solve_graph
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp import board_poses, planar_twins
 from lhgraph.estimation.init.twins import resolve_twins
@@ -52,21 +52,29 @@ def test_deck_log_character(deck_capture):
     assert np.all(np.diff(a.time) >= 0)
 
 
-def test_few_diode_stopping_rule_tests_the_median_state_when_calibrating(deck_capture):
-    """Calibrating a deck tests the states' median step (the stations have their own test),
-    tracking it tests 95 % of them (the path is the product); a user's quantile is kept and
-    many-diode data keeps every state."""
+def test_few_diode_stopping_rule_when_calibrating_and_when_tracking(deck_capture):
+    """Calibrating a deck tests the states' median step and the stations within a quarter
+    sigma (the stations have their own test, their steps shrink unevenly); tracking tests
+    95 % of the states (the path is the product) and the root variables as any solve does;
+    a user's settings are kept and many-diode data keeps every state and 0.05 sigma."""
     angles = deck_capture.angles
     _, calibrating, few = graph_preparation(angles, GraphOptions())
-    assert few and calibrating.board_step_quantile == FEW_DIODE_STEP_QUANTILE == 0.5
-    _, tracking, _ = graph_preparation(angles, GraphOptions(),
-                                       step_quantile=FEW_DIODE_TRACK_STEP_QUANTILE)
+    assert few and calibrating.board_step_quantile == FEW_DIODE_CALIBRATION.board_step_quantile
+    assert calibrating.board_step_quantile == 0.5
+    assert calibrating.step_tolerance_sigma == FEW_DIODE_CALIBRATION.step_tolerance_sigma
+    assert calibrating.step_tolerance_sigma == 0.25
+    _, tracking, _ = graph_preparation(angles, GraphOptions(), stop=FEW_DIODE_TRACKING)
     assert tracking.board_step_quantile == 0.95
-    _, chosen, _ = graph_preparation(angles, GraphOptions(board_step_quantile=0.8))
-    assert chosen.board_step_quantile == 0.8
+    assert tracking.step_tolerance_sigma == STEP_TOLERANCE_SIGMA == 0.05
+    _, chosen, _ = graph_preparation(angles, GraphOptions(board_step_quantile=0.8,
+                                                          step_tolerance_sigma=0.0))
+    assert chosen.board_step_quantile == 0.8 and chosen.step_tolerance_sigma == 0.0
     board = simulate(SimulationConfig(duration_s=1.0), seed=1)  # the 32-diode board
     _, many, few_many = graph_preparation(board.angles, GraphOptions())
     assert not few_many and many.board_step_quantile is None
+    assert many.step_tolerance_sigma is None
+    assert LMParams.from_options(many).step_tolerance_sigma == STEP_TOLERANCE_SIGMA
+    assert LMParams.from_options(chosen).step_tolerance_sigma == 0.0
 
 
 def test_logging_options_checked():

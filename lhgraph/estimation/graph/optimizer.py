@@ -42,7 +42,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.options import STEP_TOLERANCE_SIGMA, GraphOptions
 from lhgraph.estimation.graph.variables import BOARD_POSE, VariableLayout
 
 Array = NDArray[np.float64]
@@ -81,8 +81,10 @@ class LMParams:
 
     @classmethod
     def from_options(cls, options: GraphOptions) -> LMParams:
+        step = options.step_tolerance_sigma
         return cls(options.max_iterations, options.relative_tolerance,
-                   options.step_tolerance_sigma, options.board_step_tolerance_rad,
+                   STEP_TOLERANCE_SIGMA if step is None else step,
+                   options.board_step_tolerance_rad,
                    options.board_step_tolerance_m, options.board_step_quantile or 1.0,
                    options.max_board_step_rad, options.max_board_step_m)
 

@@ -30,7 +30,7 @@ from lhgraph.estimation.graph.optimizer import (
     isam2_batch,
     levenberg_marquardt,
 )
-from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.options import FEW_DIODE_CALIBRATION, FewDiodeStop, GraphOptions
 from lhgraph.estimation.graph.variables import STATION_POSE, VariableLayout, initial_values
 from lhgraph.estimation.imu_calibration import fit_imu_calibration
 from lhgraph.estimation.inertial import InertialData, inertial_data, initial_gravity
@@ -52,16 +52,6 @@ Array = NDArray[np.float64]
 Progress = Callable[[str], None]
 FEW_DIODES = 5
 """The default initialiser's PnP needs this many diodes with both angles per measurement."""
-FEW_DIODE_STEP_QUANTILE = 0.5
-"""The board-step quantile of the calibration's stopping rule on few-diode data
-(GraphOptions): the stations, its product, have their own test; the bulk of the path must have
-settled, not every state (on the real Crazyflie LH1 log the 0.95 quantile took 36 LM
-iterations instead of 15, for station 1 within 0.5 mm, half its 1-sigma, of the same place,
-the same measure (b) and the same path against the mocap)."""
-FEW_DIODE_TRACK_STEP_QUANTILE = 0.95
-"""The board-step quantile of tracking's stopping rule on few-diode data: the path is the
-product (states seen by one station only can sit in a mirror pose that turns for dozens of
-iterations)."""
 IMU_DISAGREEMENT = 1.5
 """The IMU refinement warns when it raises the light's median absolute residual by more than
 this factor, and with ``imu_factors = "auto"`` replaces GTSAM's combined factors that do
@@ -299,7 +289,7 @@ def undetermined(message: str, layout: VariableLayout, problem: GraphProblem) ->
 def graph_preparation(angles: Angles, options: GraphOptions,
                           progress: Progress | None = None,
                           models: dict[int, StationModel] | None = None,
-                          step_quantile: float = FEW_DIODE_STEP_QUANTILE
+                          stop: FewDiodeStop = FEW_DIODE_CALIBRATION
                           ) -> tuple[Angles, GraphOptions, bool]:
     """``angles``, ``options`` and whether the data is few-diode, made ready for the graph
     by the stations' generation (``models``) and the receiver's diodes:
@@ -311,8 +301,8 @@ def graph_preparation(angles: Angles, options: GraphOptions,
       angles: both planes of a turn share a state (:func:`plane_cycles`);
     - every station LH2: the angle-noise floor ``options.lh2_angle_sigma_rad``;
     - few-diode data: the angle-noise floor ``few_diode_sigma_rad`` and, unless set, the
-      stopping rule's board-step quantile ``step_quantile`` (the calibration's
-      ``FEW_DIODE_STEP_QUANTILE``; tracking passes ``FEW_DIODE_TRACK_STEP_QUANTILE``).
+      stopping rule's board-step quantile and station tolerance of ``stop`` (the
+      calibration's ``FEW_DIODE_CALIBRATION``; tracking passes ``FEW_DIODE_TRACKING``).
 
     Shared by the calibration and by tracking."""
     few = few_diode(angles)
@@ -332,7 +322,10 @@ def graph_preparation(angles: Angles, options: GraphOptions,
         options = replace(
             options,
             angle_sigma_rad=max(options.angle_sigma_rad, options.few_diode_sigma_rad),
-            board_step_quantile=options.board_step_quantile or step_quantile)
+            board_step_quantile=options.board_step_quantile or stop.board_step_quantile,
+            step_tolerance_sigma=(stop.step_tolerance_sigma
+                                  if options.step_tolerance_sigma is None
+                                  else options.step_tolerance_sigma))
     return angles, options, few
 
 

@@ -30,12 +30,8 @@ from lhgraph.errors import InputError, SolverError
 from lhgraph.estimation.graph.factors import build_graph
 from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import LMParams, OptimizerResult, levenberg_marquardt
-from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.solver import (
-    FEW_DIODE_TRACK_STEP_QUANTILE,
-    graph_preparation,
-    resolve_estimates,
-)
+from lhgraph.estimation.graph.options import FEW_DIODE_TRACKING, GraphOptions
+from lhgraph.estimation.graph.solver import graph_preparation, resolve_estimates
 from lhgraph.estimation.graph.variables import BOARD_POSE, initial_values
 from lhgraph.estimation.inertial import inertial_data, start_with_imu
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
@@ -247,7 +243,7 @@ def track(board: Board, angles: Angles, stations: Stations,
     angles, options, few = graph_preparation(
         angles, options, progress, models or {k: stations.stations[k].model
                                               for k in stations.indices()},
-        FEW_DIODE_TRACK_STEP_QUANTILE)
+        FEW_DIODE_TRACKING)
     options = resolve_estimates(options, few, imu is not None)
     problem, T_world_lh = tracking_problem(board, angles, stations, models)
     if few:
