@@ -46,7 +46,7 @@ import numpy as np
 from lhgraph.estimation.graph.factors import build_graph
 from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import LMParams, levenberg_marquardt
-from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.options import STEP_TOLERANCE_SIGMA, GraphOptions
 from lhgraph.estimation.graph.solver import graph_preparation, resolve_estimates, solve_graph
 from lhgraph.estimation.graph.variables import BOARD_POSE, STATION_POSE, initial_values
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
@@ -175,7 +175,8 @@ def main() -> int:
         print(f"whole process: median {np.median(whole):.2f} s", flush=True)
     variants = [(f"limit {cap}", GraphOptions(max_iterations=cap)) for cap in sorted(args.caps)]
     variants.append(("95 % of the states' steps, limit 120",
-                     GraphOptions(max_iterations=120, board_step_quantile=0.95)))
+                     GraphOptions(max_iterations=120, board_step_quantile=0.95,
+                                  step_tolerance_sigma=STEP_TOLERANCE_SIGMA)))
     runs = []
     for label, options in variants:
         tic = time.perf_counter()

@@ -227,25 +227,26 @@ def test_numpy_cost_is_the_graph_error(loss):
 
 def test_rescaled_linearisation_is_the_one_made_at_those_levels():
     """Linearised, rescaled at the same point (its Jacobians kept and rescaled, not computed
-    again) and linearised again, the graph gives the same linear system as a fresh graph
-    whose levels were set before its first evaluation."""
+    again) and linearised again, the graph gives the linear system of a graph built with
+    those levels in its options (angle variance x2, motion-prior PSDs x0.3); and the
+    levels do change the system."""
     sim = _capture("default", duration_s=1.0, reflection_fraction=0.03)
-    _, graph, ev, values = _graph(sim, GraphOptions())
-    graph.linearize(values)  # the Jacobians at the first levels, kept by the evaluator
+    options = GraphOptions()
+    _, graph, ev, values = _graph(sim, options)
+    first, _ = graph.linearize(values).jacobian()  # the Jacobians at the first levels
     ev.scale_motion_prior(0.3)
     ev.scale_bearing_noise(2.0)
-    _, fresh_graph, fresh, _ = _graph(sim, GraphOptions())
-    fresh.scale_motion_prior(0.3)
-    fresh.scale_bearing_noise(2.0)
-    rescaled, made = graph.linearize(values), fresh_graph.linearize(values)
-    assert rescaled.size() == made.size()
-    A, b = rescaled.jacobian()
-    A_made, b_made = made.jacobian()
-    assert np.array_equal(A, A_made) and np.array_equal(b, b_made)
-    # and the levels changed the system: not the first linearisation again
-    ev.scale_motion_prior(1 / 0.3)
-    ev.scale_bearing_noise(0.5)
-    assert not np.allclose(graph.linearize(values).jacobian()[0], A)
+    levels = dataclasses.replace(options, angle_sigma_rad=options.angle_sigma_rad * np.sqrt(2.0),
+                                 accel_psd_rot=options.accel_psd_rot * 0.3,
+                                 accel_psd_pos=options.accel_psd_pos * 0.3)
+    _, built_graph, _, _ = _graph(sim, levels)
+    A, b = graph.linearize(values).jacobian()
+    A_built, b_built = built_graph.linearize(values).jacobian()
+    assert A.shape == A_built.shape
+    scale = np.abs(A_built).max()
+    assert np.abs(A - A_built).max() < 1e-12 * scale
+    assert np.allclose(b, b_built, rtol=1e-12, atol=1e-12 * np.abs(b_built).max())
+    assert np.abs(A - first).max() > 1e-3 * scale
 
 
 def test_diode_biases_are_estimated_with_the_stations():

@@ -106,7 +106,9 @@ class FactorEvaluator:
         self._motion_scale = 1.0  # 1/sqrt(s): the motion prior's covariance is s * Q
         self._bearing_scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
         self._jacobians_ready = False
-        self._raw_jacobians = None  # unscaled, at the cached point
+        self._raw_jacobians: tuple[tuple[Array, Array, Array], tuple[Array, ...]] | None = None
+        """Unscaled bearing (board pose, twist, station) and motion-prior Jacobians at the
+        cached point."""
         self.imu = None if inertial is None else ImuTerms(inertial, layout, options)
         """The twist IMU factors' residuals (None without them)."""
         self.combined: CombinedImu | None = None

@@ -54,7 +54,8 @@ def redundancy(lin: gtsam.GaussianFactorGraph, groups: list[range], ordering: gt
     dimensions count), made from ``lin`` when not given."""
     net = lin.eliminateSequential(ordering)
     rng = np.random.default_rng(seed)
-    every_key = lin.gradientAtZero() if zero is None else zero  # made in C++
+    # a vector per variable, made in C++ when not given
+    every_key = lin.gradientAtZero() if zero is None else zero
     out = []
     for factors in groups:
         members = [lin.at(i) for i in factors]

@@ -19,7 +19,8 @@ levels; the solve has *converged* at an iteration that left the levels as they w
 either
 
 - lowered the error by less than ``relative_tolerance`` (relative, floored at 1), or
-- left the root variables (the stations) within ``step_tolerance_sigma`` standard deviations
+- left the root variables (the stations; with the IMU also its biases, gravity and
+  calibration) within ``step_tolerance_sigma`` standard deviations
   of where the iteration converges to (per coordinate, estimated from how fast the steps
   shrink: :func:`remaining_sigmas`) while no board pose moved by more than
   ``board_step_tolerance_rad`` / ``_m`` (the path is an output too: on the hive recording the

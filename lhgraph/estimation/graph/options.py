@@ -40,7 +40,9 @@ and unevenly while weakly seen states still turn, so the rate estimate of what r
 rough, and a quarter of a sigma is the test (not 0.05): on the real LH1 log 11 iterations
 instead of 15 (station 1 0.48 mm from the 36-iteration answer, against 0.49), on the LH2 log
 11 instead of 18 (0.37 mm from it), measure (b) the same on both; on 10 simulated decks
-station 1 1.17 mm / 0.027 deg from the truth (median) against 1.05 mm / 0.022 deg."""
+station 1 1.17 mm / 0.029 deg from the truth (median) against 1.05 mm / 0.025 deg
+(``benchmarks/deck_benchmark.py``). The test applies to every root variable of the graph:
+with the IMU also its biases, gravity and calibration."""
 FEW_DIODE_TRACKING = FewDiodeStop(board_step_quantile=0.95,
                                   step_tolerance_sigma=STEP_TOLERANCE_SIGMA)
 """Tracking few-diode data: the path is the product (states seen by one station only can sit
