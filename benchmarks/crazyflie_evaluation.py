@@ -49,8 +49,9 @@ from lhgraph.io.trajectory import load_trajectory
 from lhgraph.model import lh1, lh2
 
 ROOT = Path(__file__).resolve().parents[1]
-LOGS = {"lh1": Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move/log02"),
-        "lh2": Path("/work/shared/data/bitcraze-positioning/lh2_crossingBeam_move/log00")}
+DATA = ROOT.parent / "shared" / "data" / "bitcraze-positioning"
+LOGS = {"lh1": DATA / "lh1_crossingBeam_move" / "log02",
+        "lh2": DATA / "lh2_crossingBeam_move" / "log00"}
 SEARCH_S = 0.1
 PERCENTILES = (25, 50, 75, 90, 95)
 

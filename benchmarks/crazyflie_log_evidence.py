@@ -29,7 +29,7 @@ from lhgraph.model.boards import crazyflie_deck
 from lhgraph.model.station import FactoryCalibration, StationModel, ideal_from_measured
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")
+DATA = ROOT.parent / "shared" / "data" / "bitcraze-positioning" / "lh1_crossingBeam_move"
 
 
 def groups(t: np.ndarray) -> np.ndarray:

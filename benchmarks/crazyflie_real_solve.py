@@ -42,8 +42,9 @@ from lhgraph.io.angles import Angles, load_angles, save_angles
 from lhgraph.io.stations import load_stations
 
 ROOT = Path(__file__).resolve().parents[1]
-LOGS = {"lh1": Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move/log02"),
-        "lh2": Path("/work/shared/data/bitcraze-positioning/lh2_crossingBeam_move/log00")}
+DATA = ROOT.parent / "shared" / "data" / "bitcraze-positioning"
+LOGS = {"lh1": DATA / "lh1_crossingBeam_move" / "log02",
+        "lh2": DATA / "lh2_crossingBeam_move" / "log00"}
 
 
 def lhgraph(*args: str) -> tuple[str, float]:

@@ -3,7 +3,7 @@ angles (repeats dropped; LH2 logs recognised), the Bitcraze calibration mapping,
 import.
 
 Synthetic logs are built with the project's own writer. The real-data tests read
-``/work/shared/data/bitcraze-positioning`` (no licence: never copied into the repository)
+``<repo>/../shared/data/bitcraze-positioning`` (no licence: never copied into the repository)
 and are skipped when it is absent.
 """
 
@@ -32,7 +32,7 @@ from lhgraph.model.board import load_board
 from lhgraph.model.boards import crazyflie_deck
 from lhgraph.model.station import FactoryCalibration, StationModel, ideal_from_measured
 
-DATA = Path("/work/shared/data/bitcraze-positioning")
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "bitcraze-positioning"
 LH1 = DATA / "lh1_crossingBeam_move"
 needs_data = pytest.mark.skipif(not (LH1 / "log02").is_file(),
                                 reason="shared Bitcraze dataset absent")

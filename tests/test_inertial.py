@@ -218,7 +218,8 @@ def test_simulate_writes_imu_csv(tmp_path, capsys):
     assert "imu" in capsys.readouterr().err
 
 
-LH1_LOG = Path("/work/shared/data/bitcraze-positioning/lh1_crossingBeam_move")
+LH1_LOG = (Path(__file__).resolve().parents[2] / "shared" / "data" / "bitcraze-positioning"
+           / "lh1_crossingBeam_move")
 
 
 @pytest.mark.skipif(not (LH1_LOG / "log02").is_file(), reason="needs ../shared's Crazyflie log")

@@ -25,7 +25,8 @@ CAL = FactoryCalibration(phase=[0.0, 0.0032], tilt=[-0.052, 0.0497], gibphase=[2
                          gibmag=[-0.004, 0.005])
 LH2 = StationModel(CAL, generation=2)
 POINTS = np.array([[2.0, 0.4, -0.3], [3.0, -1.0, 0.8], [1.5, 0.2, 0.1], [4.0, 2.5, -1.5]])
-LH2_LOG = Path("/work/shared/data/bitcraze-positioning/lh2_crossingBeam_move")
+LH2_LOG = (Path(__file__).resolve().parents[2] / "shared" / "data" / "bitcraze-positioning"
+           / "lh2_crossingBeam_move")
 
 
 def test_ideal_planes_known_answers():
