@@ -16,10 +16,11 @@ Variants, each on the whole bag: the inlier fraction and rms at a fixed 40 µrad
 sigma (how hive_evaluation.py compares models), the default solve's rms and its path
 against OptiTrack (world, hand-eye and time offset fitted), and station 1 from 8 s slices
 with held-out boards (the tracker's sensor positions solved on the bag without the slice,
-as ``hive_slice_spread.py``'s held-out table) against the whole bag (rests thinned), for 7
-slices 2 s apart from the motion start and for the 3 slices 4 s apart among them (the
-issue's slices). Reads ``data8.11.bag`` from ../shared (never copied); writes the markdown
-to ``--output`` (default docs/results/hive_stamps_and_axes.md) and prints it.
+as ``hive_slice_spread.py``'s held-out table) against the whole bag (rests thinned), for the
+slices 2 s apart from the motion start that end before the final rest, and for the 3 slices
+4 s apart among them (the issue's slices). Reads ``data8.11.bag`` from ../shared (never
+copied); writes the markdown to ``--output`` (default docs/results/hive_stamps_and_axes.md)
+and prints it.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from hive_slice_spread import BAG, REST_KEEP_EVERY, difference
 
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.rests import rest_spans
 from lhgraph.estimation.sweep_times import SLOT_S, rotor_grid
 from lhgraph.importers.hive import align_to_mocap, import_hive
 from lhgraph.io.angles import Angles, load_angles
@@ -49,7 +51,7 @@ from lhgraph.workflow.window import motion_start
 REPO = Path(__file__).resolve().parents[1]
 CYCLE_S = 4 * SLOT_S
 SLICE_STEP_S = 2.0
-N_SLICES = 7
+SLICE_S = 8.0
 CALIBRATION_TERMS = ("phase", "tilt", "curve", "gibphase", "gibmag")
 
 
@@ -79,7 +81,9 @@ def on_grid(angles: Angles, direction: float) -> tuple[Angles, list[str]]:
             on = sweep_time[sel] != stamp[sel]
             gaps = np.diff(sweep_time[sel][on])
             period_ms = np.median(gaps / np.round(gaps / CYCLE_S)) * 1e3
-            rows.append(f"| {s} | {a} | {len(sel)} | {period_ms:.3f} | "
+            turn = np.exp(2j * np.pi * (sweep_time[sel][on] - angles.time[0]) / SLOT_S)
+            phase_ms = np.angle(np.mean(turn)) % (2 * np.pi) / (2 * np.pi) * SLOT_S * 1e3
+            rows.append(f"| {s} | {a} | {len(sel)} | {period_ms:.3f} | {phase_ms:.2f} | "
                         f"{np.sqrt(np.mean(r_ms[on] ** 2)):.2f} | "
                         f"{np.percentile(np.abs(r_ms[on]), 95):.2f} | {np.sum(~on)} |")
     t = sweep_time[ids] + direction * angles.angle * SLOT_S / np.pi
@@ -99,15 +103,24 @@ def swapped_axes(models: dict[int, StationModel], convention: Convention
     return out
 
 
-def held_out_slices(board: Board, angles: Angles, models: dict, t0: float
+def slice_starts(angles: Angles) -> np.ndarray:
+    """Starts (s) of the ``SLICE_S`` slices ``SLICE_STEP_S`` apart from the motion start
+    that end before the rest at the end of the bag (:func:`rest_spans`)."""
+    t0 = motion_start(angles)
+    rests = rest_spans(angles)
+    end = min([float(a) for a, _ in rests if a > t0], default=float(angles.time.max()))
+    return t0 + SLICE_STEP_S * np.arange(int((end - t0 - SLICE_S) // SLICE_STEP_S) + 1)
+
+
+def held_out_slices(board: Board, angles: Angles, models: dict, starts: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Station 1 from ``N_SLICES`` 8 s slices ``SLICE_STEP_S`` apart, each with the board
-    solved without it, less the whole bag (rests thinned) with that board: distances (mm)
-    and rotation differences (deg) per slice."""
+    """Station 1 from the ``SLICE_S`` slices at ``starts``, each with the board solved
+    without it, less the whole bag (rests thinned) with that board: distances (mm) and
+    rotation differences (deg) per slice."""
     options = GraphOptions(rest_keep_every=REST_KEEP_EVERY)
     dist, turn = [], []
-    for k in range(N_SLICES):
-        inside = (angles.time >= t0 + SLICE_STEP_S * k) & (angles.time < t0 + SLICE_STEP_S * k + 8)
+    for start in starts:
+        inside = (angles.time >= start) & (angles.time < start + SLICE_S)
         cal = solve_graph(board, angles.select(~inside), models,
                           GraphOptions(sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M))
         b = with_sensor_offsets(board, cal.sensor_offset_m)
@@ -124,11 +137,11 @@ def rms(x: np.ndarray) -> float:
 
 
 def variant_row(name: str, board: Board, angles: Angles, models: dict, mocap: Trajectory,
-                t0: float) -> str:
+                starts: np.ndarray) -> str:
     fixed = solve_graph(board, angles, models, GraphOptions(adapt_angle_sigma=False)).residuals
     whole = solve_graph(board, angles, models)
     al = align_to_mocap(whole.trajectory, mocap)
-    dist, turn = held_out_slices(board, angles, models, t0)
+    dist, turn = held_out_slices(board, angles, models, starts)
     issue = np.arange(3) * int(round(4 / SLICE_STEP_S))  # 0, 4 and 8 s after the start
     return (f"| {name} | {fixed.inlier_fraction():.4f} / {fixed.rms_urad():.1f} | "
             f"{whole.residuals.rms_urad():.1f} | {al.rmse_mm():.2f} / {al.rmse_deg():.2f} / "
@@ -152,25 +165,30 @@ def main() -> int:
         angles = load_angles(Path(tmp) / "angles.csv")
         models = station_models(Path(tmp) / "ootx.toml", Convention())
         mocap = load_trajectory(Path(tmp) / "mocap.csv")
-    t0 = motion_start(angles)
+    starts = slice_starts(angles)
     gridded, grid_rows = on_grid(angles, +1.0)
     reversed_hits, _ = on_grid(angles, -1.0)
     lines = ["# The hive recording: its light stamps and its calibration axes", "",
              f"`python3 benchmarks/hive_stamps_and_axes.py`, {time.strftime('%Y-%m-%d')}.", "",
              "## 1. Sweep stamps against each station's and axis's rotor grid", "",
-             "| station | axis | sweeps | grid period ms | stamp scatter rms ms | 95 % within ms "
-             "| stamps more than half a slot off (kept) |", "|---|---|---|---|---|---|---|",
+             "Phase: where in its 8.333 ms slot the grid puts the sweeps, on the host clock from "
+             "the first hit (equal phases: every sweep message stamped alike, so no station's "
+             "sweeps are late against the other's).", "",
+             "| station | axis | sweeps | grid period ms | phase in the slot ms | stamp scatter "
+             "rms ms | 95 % within ms | stamps more than half a slot off (kept) |",
+             "|---|---|---|---|---|---|---|---|",
              *grid_rows, "",
              "## 2. Variants", "",
              "Fixed sigma: inlier fraction / inlier rms µrad at 40 µrad per diode. Path: the "
              "default solve's board path against OptiTrack, RMSE mm / deg / time offset ms. "
-             f"Held-out slices: station 1 from {N_SLICES} slices of 8 s, {SLICE_STEP_S:g} s "
-             "apart from the motion start, each with the tracker's sensor positions solved "
+             f"Held-out slices: station 1 from the {len(starts)} slices of {SLICE_S:g} s, "
+             f"{SLICE_STEP_S:g} s apart from the motion start ({starts[0]:.1f} s), that end "
+             "before the tracker's final rest, each with the tracker's sensor positions solved "
              "without it, against the whole bag (rests thinned) with the same board: rms "
              "distance mm / rms rotation deg; and for the 3 of them 4 s apart (the issue's "
              "slices; target 2 mm / 0.05 deg).", "",
-             "| variant | fixed sigma | default rms µrad | path | held-out, 7 slices | "
-             "held-out, 3 slices |", "|---|---|---|---|---|---|"]
+             "| variant | fixed sigma | default rms µrad | path | "
+             f"held-out, {len(starts)} slices | held-out, 3 slices |", "|---|---|---|---|---|---|"]
     print("\n".join(lines), flush=True)
     variants = [
         ("as imported (stamps; hive horizontal calibration on axis 0; gib -1, curve +1)",
@@ -185,7 +203,7 @@ def main() -> int:
          swapped_axes(models, Convention(1.0, 1.0))),
     ]
     for name, data, m in variants:
-        lines.append(variant_row(name, board, data, m, mocap, t0))
+        lines.append(variant_row(name, board, data, m, mocap, starts))
         print(lines[-1], flush=True)
     out.write_text("\n".join(lines) + "\n")
     print(f"wrote {out}")
