@@ -37,7 +37,7 @@ from hive_slice_spread import BAG, REST_KEEP_EVERY, difference
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.rests import rest_spans
-from lhgraph.estimation.sweep_times import SLOT_S, rotor_grid
+from lhgraph.estimation.sweep_times import SLOT_S, rotor_grid, sweep_table
 from lhgraph.importers.hive import align_to_mocap, import_hive
 from lhgraph.io.angles import Angles, load_angles
 from lhgraph.io.files import check_writable
@@ -55,22 +55,14 @@ SLICE_S = 8.0
 CALIBRATION_TERMS = ("phase", "tilt", "curve", "gibphase", "gibmag")
 
 
-def sweeps(angles: Angles) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Sweep id of every hit; per sweep its stamp, station and axis."""
-    ids = angles.sweep_ids()
-    stamp = np.bincount(ids, weights=angles.time) / np.bincount(ids)
-    first = np.zeros(len(stamp), dtype=np.int64)
-    first[ids[::-1]] = np.arange(len(ids))[::-1]
-    return ids, stamp, angles.lighthouse[first], angles.axis[first]
-
-
 def on_grid(angles: Angles, direction: float) -> tuple[Angles, list[str]]:
     """``angles`` with every sweep on its station's and axis's rotor grid (stamps further
     than half a slot from it keep their value) and each hit ``direction * angle T / 2 pi``
     after it (+1: the plane passes larger angles later, SPEC 3); the table rows of the grid
     fit per station and axis."""
-    ids, stamp, station, axis = sweeps(angles)
+    ids, stamp, station, axis = sweep_table(angles)
     sweep_time = stamp.copy()
+    mid = 0.5 * (angles.time[0] + angles.time[-1])
     rows = []
     for s in np.unique(station).tolist():
         for a in (0, 1):
@@ -79,11 +71,10 @@ def on_grid(angles: Angles, direction: float) -> tuple[Angles, list[str]]:
             sweep_time[sel] = rotor_grid(stamp[sel], CYCLE_S, max_residual_s=SLOT_S / 2)
             r_ms = (stamp[sel] - sweep_time[sel]) * 1e3
             on = sweep_time[sel] != stamp[sel]
-            gaps = np.diff(sweep_time[sel][on])
-            period_ms = np.median(gaps / np.round(gaps / CYCLE_S)) * 1e3
-            turn = np.exp(2j * np.pi * (sweep_time[sel][on] - angles.time[0]) / SLOT_S)
-            phase_ms = np.angle(np.mean(turn)) % (2 * np.pi) / (2 * np.pi) * SLOT_S * 1e3
-            rows.append(f"| {s} | {a} | {len(sel)} | {period_ms:.3f} | {phase_ms:.2f} | "
+            grid = sweep_time[sel][on]
+            period, start = np.polyfit(np.round((grid - grid[0]) / CYCLE_S), grid, 1)
+            after_ms = ((start - mid) % period) * 1e3  # the grid's first sweep after mid-bag
+            rows.append(f"| {s} | {a} | {len(sel)} | {period * 1e3:.3f} | {after_ms:.2f} | "
                         f"{np.sqrt(np.mean(r_ms[on] ** 2)):.2f} | "
                         f"{np.percentile(np.abs(r_ms[on]), 95):.2f} | {np.sum(~on)} |")
     t = sweep_time[ids] + direction * angles.angle * SLOT_S / np.pi
@@ -105,11 +96,11 @@ def swapped_axes(models: dict[int, StationModel], convention: Convention
 
 def slice_starts(angles: Angles) -> np.ndarray:
     """Starts (s) of the ``SLICE_S`` slices ``SLICE_STEP_S`` apart from the motion start
-    that end before the rest at the end of the bag (:func:`rest_spans`)."""
-    t0 = motion_start(angles)
-    rests = rest_spans(angles)
-    end = min([float(a) for a, _ in rests if a > t0], default=float(angles.time.max()))
-    return t0 + SLICE_STEP_S * np.arange(int((end - t0 - SLICE_S) // SLICE_STEP_S) + 1)
+    that end before the rest that closes the bag, if one does (:func:`rest_spans`)."""
+    t0, last = motion_start(angles), float(angles.time.max())
+    final = [float(a) for a, b in rest_spans(angles) if a > t0 and b >= last - 0.5]
+    end = final[0] if final else last
+    return t0 + SLICE_STEP_S * np.arange(max(int((end - t0 - SLICE_S) // SLICE_STEP_S) + 1, 0))
 
 
 def held_out_slices(board: Board, angles: Angles, models: dict, starts: np.ndarray
@@ -166,18 +157,24 @@ def main() -> int:
         models = station_models(Path(tmp) / "ootx.toml", Convention())
         mocap = load_trajectory(Path(tmp) / "mocap.csv")
     starts = slice_starts(angles)
+    if len(starts) < 5:
+        print(f"{args.bag}: {len(starts)} slices of {SLICE_S:g} s in the motion, 5 needed")
+        return 2
     gridded, grid_rows = on_grid(angles, +1.0)
     reversed_hits, _ = on_grid(angles, -1.0)
     lines = ["# The hive recording: its light stamps and its calibration axes", "",
              f"`python3 benchmarks/hive_stamps_and_axes.py`, {time.strftime('%Y-%m-%d')}.", "",
              "## 1. Sweep stamps against each station's and axis's rotor grid", "",
-             "Phase: where in its 8.333 ms slot the grid puts the sweeps, on the host clock from "
-             "the first hit (equal phases: every sweep message stamped alike, so no station's "
-             "sweeps are late against the other's).", "",
-             "| station | axis | sweeps | grid period ms | phase in the slot ms | stamp scatter "
-             "rms ms | 95 % within ms | stamps more than half a slot off (kept) |",
+             "After mid-bag: when each grid (its own fitted line) next sweeps after the middle "
+             "of the bag, ms on the host clock: stamped alike, the station-axis grids follow "
+             "each other one 8.333 ms slot apart in the order the stations sweep.", "",
+             "| station | axis | sweeps | grid period ms | next sweep after mid-bag ms | stamp "
+             "scatter rms ms | 95 % within ms | stamps more than half a slot off (kept) |",
              "|---|---|---|---|---|---|---|---|",
              *grid_rows, "",
+             f"Largest |angle| in the bag: {np.abs(angles.angle).max():.3f} rad, so the two "
+             "directions of the hit offsets below place a hit up to "
+             f"{2 * np.abs(angles.angle).max() * SLOT_S / np.pi * 1e3:.2f} ms apart.", "",
              "## 2. Variants", "",
              "Fixed sigma: inlier fraction / inlier rms µrad at 40 µrad per diode. Path: the "
              "default solve's board path against OptiTrack, RMSE mm / deg / time offset ms. "

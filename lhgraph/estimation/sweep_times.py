@@ -29,8 +29,8 @@ CO_LOGGED_S = 2e-3
 """An axis-0 sweep is co-logged with an axis-1 sweep of its station stamped this close."""
 
 
-def _sweeps(angles: Angles) -> tuple[NDArray[np.int64], Array, NDArray[np.int64],
-                                     NDArray[np.int64]]:
+def sweep_table(angles: Angles) -> tuple[NDArray[np.int64], Array, NDArray[np.int64],
+                                         NDArray[np.int64]]:
     """Sweep id of every hit; per sweep its mean stamp, station and axis."""
     ids = angles.sweep_ids()
     count = np.bincount(ids)
@@ -76,7 +76,7 @@ def rotor_grid(t: Array, period_s: float = 4 * SLOT_S, max_residual_s: float = 2
 def co_logged_fraction(angles: Angles) -> dict[int, float]:
     """Per station, the fraction of its axis-0 sweeps stamped within ``CO_LOGGED_S`` of one
     of its axis-1 sweeps (~0 for hit-timed captures, ~1 for a deck log)."""
-    _, t, station, axis = _sweeps(angles)
+    _, t, station, axis = sweep_table(angles)
     out = {}
     for s in np.unique(station).tolist():
         t0 = t[(station == s) & (axis == 0)]
@@ -110,7 +110,7 @@ def retime_cycles(angles: Angles, co_logged: set[int] | None = None,
     a log's stamps stays (it shifts every state alike)."""
     if co_logged is None:
         co_logged = co_logged_stations(angles)
-    ids, t, station, axis = _sweeps(angles)
+    ids, t, station, axis = sweep_table(angles)
     count = np.maximum(np.bincount(ids, minlength=len(t)), 1)
     passed = np.bincount(ids, weights=angles.time - angles.angle * slot_s / np.pi,
                          minlength=len(t)) / count
@@ -147,7 +147,7 @@ def plane_cycles(angles: Angles) -> Angles:
     sweep that follows it within ``LH2_CYCLE_GAP_S`` (a 4-diode deck then has both planes'
     8 hits per state, as the LH1 grid gives both axes; the bearing factor propagates each
     hit by its time offset with the state's twist)."""
-    ids, t, station, axis = _sweeps(angles)
+    ids, t, station, axis = sweep_table(angles)
     state = np.arange(len(t))
     for s in np.unique(station).tolist():
         rows = np.flatnonzero(station == s)
