@@ -32,6 +32,7 @@ from lhgraph.geometry.transforms import se3_log
 from lhgraph.importers.hive import import_hive
 from lhgraph.io.angles import Angles, load_angles
 from lhgraph.io.files import check_writable
+from lhgraph.io.trajectory import Trajectory, load_trajectory
 from lhgraph.model.board import Board, load_board, with_sensor_offsets
 from lhgraph.model.station import Convention
 from lhgraph.workflow.inputs import station_models
@@ -159,6 +160,36 @@ def tracker_geometry(board: Board, angles: Angles, models: dict, t0: float) -> l
     return lines
 
 
+def held_out_board(board: Board, angles: Angles, models: dict, inside: np.ndarray,
+                   rest_keep_every: int = 1) -> Board:
+    """``board`` with its sensor positions solved (``SENSOR_OFFSET_SIGMA_M``) on the hits of
+    ``angles`` outside the mask ``inside``, their rests thinned 1 in ``rest_keep_every``."""
+    cal = solve_graph(board, angles.select(~inside), models,
+                      GraphOptions(sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M,
+                                   rest_keep_every=rest_keep_every))
+    return with_sensor_offsets(board, cal.sensor_offset_m)
+
+
+def against_whole(board: Board, angles: Angles, models: dict, inside: np.ndarray,
+                  rest_keep_every: int) -> tuple[np.ndarray, float]:
+    """Station 1 solved from the hits ``inside`` less station 1 from all of ``angles`` (both
+    with ``board``, rests thinned 1 in ``rest_keep_every``): :func:`difference`."""
+    options = GraphOptions(rest_keep_every=rest_keep_every)
+    whole = solve_graph(board, angles, models, options)
+    part = solve_graph(board, angles.select(inside), models, options)
+    return difference(whole.stations.pose(1), part.stations.pose(1))
+
+
+def imported_bag(bag: Path) -> tuple[Board, Angles, dict, Trajectory]:
+    """The board, angles (sync-bit offsets corrected), station models (default convention)
+    and OptiTrack path of the bag, imported into a temporary folder."""
+    with tempfile.TemporaryDirectory() as tmp:
+        import_hive(bag, tmp)
+        return (load_board(Path(tmp) / "board.toml"), load_angles(Path(tmp) / "angles.csv"),
+                station_models(Path(tmp) / "ootx.toml", Convention()),
+                load_trajectory(Path(tmp) / "mocap.csv"))
+
+
 def held_out_boards(board: Board, angles: Angles, models: dict, t0: float) -> list[str]:
     """Each slice judged with a board solved without it: the sensor positions solved on the
     bag less that slice (its rests as they are, or thinned), then that board for the slice
@@ -175,19 +206,14 @@ def held_out_boards(board: Board, angles: Angles, models: dict, t0: float) -> li
     boards: dict[tuple[int, int], Board] = {}  # (rests kept 1 in, slice) -> held-out board
     for board_keep, whole_keep in ((1, REST_KEEP_EVERY), (REST_KEEP_EVERY, REST_KEEP_EVERY),
                                    (1, ONE_WINDOW), (ONE_WINDOW, ONE_WINDOW)):
-        options = GraphOptions(rest_keep_every=whole_keep)
         diffs, turns = [], []
         for k in range(3):
             inside = in_slice(angles, t0, k)
             if (board_keep, k) not in boards:
-                cal = solve_graph(board, angles.select(~inside), models,
-                                  GraphOptions(sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M,
-                                               rest_keep_every=board_keep))
-                boards[board_keep, k] = with_sensor_offsets(board, cal.sensor_offset_m)
-            b = boards[board_keep, k]
-            whole = solve_graph(b, angles, models, options)
-            part = solve_graph(b, angles.select(inside), models, options)
-            position_mm, turn_deg = difference(whole.stations.pose(1), part.stations.pose(1))
+                boards[board_keep, k] = held_out_board(board, angles, models, inside,
+                                                       board_keep)
+            position_mm, turn_deg = against_whole(boards[board_keep, k], angles, models,
+                                                  inside, whole_keep)
             diffs.append(position_mm)
             turns.append(turn_deg)
         triplets, rms, _ = spread_cells(np.array(diffs))
@@ -211,11 +237,7 @@ def main() -> int:
         print(f"{args.bag}: not there, nothing measured")
         return 0
     out = check_writable(args.output, args.force)
-    with tempfile.TemporaryDirectory() as tmp:
-        import_hive(args.bag, tmp)
-        board = load_board(Path(tmp) / "board.toml")
-        angles = load_angles(Path(tmp) / "angles.csv")
-        models = station_models(Path(tmp) / "ootx.toml", Convention(-1, 1))
+    board, angles, models, _ = imported_bag(args.bag)
     t0 = motion_start(angles)
     lines = ["# The hive recording: station 1 over 8 s slices, variants", "",
              f"`python3 benchmarks/hive_slice_spread.py`, {time.strftime('%Y-%m-%d')}. Station "

@@ -26,26 +26,23 @@ and prints it.
 from __future__ import annotations
 
 import argparse
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from hive_slice_spread import BAG, REST_KEEP_EVERY, difference
+from hive_slice_spread import BAG, REST_KEEP_EVERY, against_whole, held_out_board, imported_bag
 
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.rests import rest_spans
 from lhgraph.estimation.sweep_times import SLOT_S, rotor_grid, sweep_table
-from lhgraph.importers.hive import align_to_mocap, import_hive
-from lhgraph.io.angles import Angles, load_angles
+from lhgraph.importers.hive import align_to_mocap
+from lhgraph.io.angles import Angles
 from lhgraph.io.files import check_writable
-from lhgraph.io.trajectory import Trajectory, load_trajectory
-from lhgraph.model.board import Board, load_board, with_sensor_offsets
+from lhgraph.io.trajectory import Trajectory
+from lhgraph.model.board import Board
 from lhgraph.model.station import Convention, StationModel
-from lhgraph.workflow.inputs import station_models
-from lhgraph.workflow.solve_config import SENSOR_OFFSET_SIGMA_M
 from lhgraph.workflow.window import motion_start
 
 REPO = Path(__file__).resolve().parents[1]
@@ -108,16 +105,12 @@ def held_out_slices(board: Board, angles: Angles, models: dict, starts: np.ndarr
     """Station 1 from the ``SLICE_S`` slices at ``starts``, each with the board solved
     without it, less the whole bag (rests thinned) with that board: distances (mm) and
     rotation differences (deg) per slice."""
-    options = GraphOptions(rest_keep_every=REST_KEEP_EVERY)
     dist, turn = [], []
     for start in starts:
         inside = (angles.time >= start) & (angles.time < start + SLICE_S)
-        cal = solve_graph(board, angles.select(~inside), models,
-                          GraphOptions(sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M))
-        b = with_sensor_offsets(board, cal.sensor_offset_m)
-        whole = solve_graph(b, angles, models, options)
-        part = solve_graph(b, angles.select(inside), models, options)
-        position_mm, turn_deg = difference(whole.stations.pose(1), part.stations.pose(1))
+        held_out = held_out_board(board, angles, models, inside)
+        position_mm, turn_deg = against_whole(held_out, angles, models, inside,
+                                              REST_KEEP_EVERY)
         dist.append(np.linalg.norm(position_mm))
         turn.append(turn_deg)
     return np.array(dist), np.array(turn)
@@ -150,12 +143,7 @@ def main() -> int:
         print(f"{args.bag}: not there, nothing measured")
         return 0
     out = check_writable(args.output, args.force)
-    with tempfile.TemporaryDirectory() as tmp:
-        import_hive(args.bag, tmp)
-        board = load_board(Path(tmp) / "board.toml")
-        angles = load_angles(Path(tmp) / "angles.csv")
-        models = station_models(Path(tmp) / "ootx.toml", Convention())
-        mocap = load_trajectory(Path(tmp) / "mocap.csv")
+    board, angles, models, mocap = imported_bag(args.bag)
     starts = slice_starts(angles)
     if len(starts) < 5:
         print(f"{args.bag}: {len(starts)} slices of {SLICE_S:g} s in the motion, 5 needed")
