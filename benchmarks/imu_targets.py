@@ -20,7 +20,7 @@ an IMU and fast against slow motion.
    (``configs/simulation/facing_planar_imu.toml``: 170 deg apart, the 32-diode paper board
    never seen by both at once, a 1 kHz IMU): ``--seeds`` captures solved without the IMU
    (how many the light alone cannot join) and with it (the initialiser bridges the turns by
-   dead reckoning, :mod:`lhgraph.estimation.init.imu_bridge`): with the defaults (GTSAM's
+   dead reckoning, :mod:`lhgraph.estimation.imu.bridge`): with the defaults (GTSAM's
    combined IMU factors), and with the twist factors and ``gyro_preintegration`` (which
    ties the rotations across the turns) at their default noise and at the simulated
    part's (``SIMULATED_NOISE``): station 1's median position and rotation error and mean

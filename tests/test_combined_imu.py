@@ -1,4 +1,4 @@
-"""GTSAM's combined IMU factors in the batch graph (lhgraph.estimation.graph.combined_imu):
+"""GTSAM's combined IMU factors in the batch graph (lhgraph.estimation.imu.combined):
 the preintegration against a simulated stream with known truth, the steps the stream does
 not cover, the variables' layout, the options, and solves with known answers.
 
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from lhgraph.errors import InputError
-from lhgraph.estimation.graph.combined_imu import RESIDUAL_GROUPS, preintegrate
+from lhgraph.estimation.imu.combined import RESIDUAL_GROUPS, preintegrate
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.graph.variables import (
@@ -205,7 +205,7 @@ def test_an_imu_that_misfits_the_light_falls_back_to_the_twist_factors():
 def test_imu_calibration_from_the_true_poses(miscalibrated_imu):
     # from the true path, the window fit finds the scales within 0.005, the offset within
     # 1 ms and the frame within 0.2 deg; applied, the stream reads the board's rates
-    from lhgraph.estimation.imu_calibration import fit_imu_calibration
+    from lhgraph.estimation.imu.calibration import fit_imu_calibration
     from lhgraph.geometry.transforms import rotation_angle, so3_exp
 
     sim = miscalibrated_imu

@@ -1,4 +1,4 @@
-"""IMU factors (lhgraph.estimation.inertial): the accelerometer residual's Jacobians against
+"""IMU factors (lhgraph.estimation.imu.inertial): the accelerometer residual's Jacobians against
 numerical ones, the IMU readings at the board states, and tracking a simulated deck with a
 simulated IMU (known bias and gravity).
 
@@ -21,7 +21,7 @@ from lhgraph.cli import main
 from lhgraph.errors import InputError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.track import track
-from lhgraph.estimation.inertial import inertial_data
+from lhgraph.estimation.imu.inertial import inertial_data
 from lhgraph.estimation.residuals import accel_residuals, gyro_residuals
 from lhgraph.geometry.transforms import rotation_angle, se3_exp, so3_exp
 from lhgraph.importers.crazyflie import import_crazyflie
@@ -309,7 +309,7 @@ def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
     # differences of the evaluator's residuals
     from lhgraph.estimation.graph.factors import build_graph
     from lhgraph.estimation.graph.variables import BOARD_TWIST, IMU_CALIBRATION, initial_values
-    from lhgraph.estimation.inertial import initial_gravity
+    from lhgraph.estimation.imu.inertial import initial_gravity
     from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
     from lhgraph.estimation.problem import build_problem
 
@@ -383,7 +383,7 @@ def gtsam_values_with(values, key, vector):
 def test_dead_reckoning_follows_the_true_motion():
     # noise-free, bias-free 1 kHz IMU of the simulator's exact motion: half a second of dead
     # reckoning from the true pose and velocity lands on the true pose
-    from lhgraph.estimation.init.imu_bridge import dead_reckon
+    from lhgraph.estimation.imu.bridge import dead_reckon
     from lhgraph.sim.imu import ImuConfig, imu_of_motion
 
     config = load_simulation_config("configs/simulation/default.toml")
@@ -446,7 +446,7 @@ def test_preintegrated_gyro_jacobians_match_numerical(miscalibrated_imu):
 
     from lhgraph.estimation.graph.factors import build_graph
     from lhgraph.estimation.graph.variables import BOARD_POSE, IMU_BIAS, initial_values
-    from lhgraph.estimation.inertial import initial_gravity
+    from lhgraph.estimation.imu.inertial import initial_gravity
     from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
     from lhgraph.estimation.problem import build_problem
 
@@ -513,7 +513,7 @@ def test_board_capture_carries_the_imu_to_the_solve(tmp_path):
 def test_reading_noise_and_the_accelerometer_factor_sigma():
     # the difference-based estimate finds a white noise under a smooth hand-held signal;
     # the options take 4x it for the accelerometer factors, within [floor, ceiling]
-    from lhgraph.estimation.inertial import (
+    from lhgraph.estimation.imu.inertial import (
         ACCEL_FACTOR_NOISE_RATIO,
         gyro_reading_sigma,
         reading_noise,

@@ -13,14 +13,14 @@
    :func:`motion_keys`;
 4. with an IMU stream and ``imu_factors`` resolving to ``"combined"``: GTSAM's
    preintegrated **combined IMU factor** over every step the stream covers, in C++
-   (:mod:`lhgraph.estimation.graph.combined_imu`); with ``"twist"``
-   (:mod:`lhgraph.estimation.inertial`): a **gyro factor** on every
+   (:mod:`lhgraph.estimation.imu.combined`); with ``"twist"``
+   (:mod:`lhgraph.estimation.imu.inertial`): a **gyro factor** on every
    state's twist and the IMU bias (linear: GTSAM's ``LinearContainerFactor``, no Python
    callback; with the IMU calibration, ``gyro_scale_sigma`` / ``imu_time_offset_sigma_s``,
    a callback on the twist, the bias and the calibration), an **accelerometer factor** over
    every step, keys :func:`accel_keys`, with ``gyro_preintegration`` (off by default) a
    **preintegrated gyro factor** over every step on both poses and the IMU bias
-   (:mod:`lhgraph.estimation.graph.imu_terms`), one factor on the gravity's magnitude and,
+   (:mod:`lhgraph.estimation.imu.twist_terms`), one factor on the gravity's magnitude and,
    with the calibration, its zero-mean prior.
 
 The residuals come from :mod:`lhgraph.estimation.residuals`; who evaluates them is the
@@ -34,7 +34,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.estimation.graph.combined_imu import CombinedImu, gravity_magnitude_factor
+from lhgraph.estimation.imu.combined import CombinedImu, gravity_magnitude_factor
 from lhgraph.estimation.graph.evaluator import SCALE_SIGMA_M2, FactorError, FactorEvaluator
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
@@ -50,7 +50,7 @@ from lhgraph.estimation.graph.variables import (
     diode_bias_family,
     sensor_offset_family,
 )
-from lhgraph.estimation.inertial import InertialData
+from lhgraph.estimation.imu.inertial import InertialData
 from lhgraph.estimation.problem import GraphProblem
 
 Array = NDArray[np.float64]

@@ -8,7 +8,7 @@ import numpy as np
 
 from lhgraph.config import check_fields, option
 from lhgraph.errors import InputError
-from lhgraph.estimation.inertial import accel_factor_sigma
+from lhgraph.estimation.imu.inertial import accel_factor_sigma
 from lhgraph.io.imu import ImuStream
 
 LOSSES = ("cauchy", "huber")
@@ -108,9 +108,9 @@ class GraphOptions:
     slows every variable; ``gyro_sigma_rad_s`` / ``accel_sigma_mps2``: noise of the IMU
     factors (a gyro reading at a state's time; an accelerometer reading over a step, which
     also carries the vibration and the lever arm the model leaves out), used when an IMU
-    stream is given (:mod:`lhgraph.estimation.inertial`), whose samples count within
+    stream is given (:mod:`lhgraph.estimation.imu.inertial`), whose samples count within
     ``imu_max_gap_s`` of a state; ``adapt_accel_sigma``: the accelerometer factors' noise
-    is instead :func:`~lhgraph.estimation.inertial.accel_factor_sigma` of the stream (its
+    is instead :func:`~lhgraph.estimation.imu.inertial.accel_factor_sigma` of the stream (its
     readings' own noise, vibration included), between ``min_accel_sigma_mps2`` and
     ``accel_sigma_mps2`` (the ceiling); ``accel_sigma_estimate``: ``"redundancy"``: from
     there the variance-component updates rescale the accelerometer factors' noise to their
@@ -123,13 +123,13 @@ class GraphOptions:
     docs/solve.md); ``gyro_preintegration``:
     also a factor per step on the rotation the gyro's readings between the two states
     integrate to
-    (:mod:`lhgraph.estimation.graph.imu_terms`; off by default: on the real Crazyflie log the
+    (:mod:`lhgraph.estimation.imu.twist_terms`; off by default: on the real Crazyflie log the
     deck's hit times and IMU stamps disagree by milliseconds at turns of ~1 rad/s, far above
     its noise, and it raised the light's residuals from 70 to 160 urad rms);
     ``adapt_gyro_sigma``: the variance-component updates (as for the motion prior) also
     rescale the preintegrated gyro factors' reading noise to their residuals, starting from
     ``gyro_sigma_rad_s`` (the ceiling) and never below the stream's own reading noise
-    (:func:`~lhgraph.estimation.inertial.gyro_reading_sigma`, at least
+    (:func:`~lhgraph.estimation.imu.inertial.gyro_reading_sigma`, at least
     ``min_gyro_sigma_rad_s``): on the simulated facing stations with a 1 kHz gyro of 0.002
     rad/s the fixed 0.02 left station 1's covariance several times too wide (mean NEES 0.9
     of 6), while the stream's noise from the start pulled hive's gyro scale to 0.95 instead of
@@ -146,17 +146,17 @@ class GraphOptions:
     reads;
     ``imu_factors``: which IMU factors the graph gets: ``"combined"``, GTSAM's preintegrated
     ``CombinedImuFactor`` between consecutive states, evaluated in C++, with a velocity and
-    an IMU bias per state (:mod:`lhgraph.estimation.graph.combined_imu`; its readings'
+    an IMU bias per state (:mod:`lhgraph.estimation.imu.combined`; its readings'
     noise the stream's own times ``imu_noise_factor``, its biases wandering by
     ``gyro_bias_walk`` (rad/s per root second) and ``accel_bias_walk`` (m/s^2 per root
     second)); ``"twist"``, a gyro factor per state and an accelerometer factor per step on
-    the states' twists with one IMU bias (:mod:`lhgraph.estimation.inertial`: the factors
+    the states' twists with one IMU bias (:mod:`lhgraph.estimation.imu.inertial`: the factors
     that solve the IMU's calibration and take ``gyro_preintegration``); ``"auto"``
     (:attr:`imu_factor_kind`): ``"twist"`` when the calibration is solved or
     ``gyro_preintegration`` is asked, ``"combined"`` otherwise (``"combined"`` with
     ``gyro_scale_sigma``, ``imu_time_offset_sigma_s`` or ``imu_rotation_sigma_rad`` takes
     the calibration found from the light-only solution,
-    :mod:`lhgraph.estimation.imu_calibration`; with ``imu_position_sigma_m`` or
+    :mod:`lhgraph.estimation.imu.calibration`; with ``imu_position_sigma_m`` or
     ``gyro_preintegration`` it is an error);
     ``diode_bias_sigma_rad``: when positive, every station sees every diode on each axis
     with a constant angle bias of this prior spread (variables of the graph,
@@ -247,13 +247,13 @@ class GraphOptions:
     @property
     def imu_calibration_from_light(self) -> bool:
         """Whether the IMU's calibration is found from the light-only solution
-        (:mod:`lhgraph.estimation.imu_calibration`): asked for with GTSAM's combined factors,
+        (:mod:`lhgraph.estimation.imu.calibration`): asked for with GTSAM's combined factors,
         which cannot solve it."""
         return self.imu_factor_kind == "combined" and self.imu_calibrated
 
     def accel_start_sigma(self, imu: ImuStream) -> float:
         """The accelerometer factors' noise (m/s^2) to start from with the stream ``imu``:
-        with ``adapt_accel_sigma`` its :func:`~lhgraph.estimation.inertial.accel_factor_sigma`
+        with ``adapt_accel_sigma`` its :func:`~lhgraph.estimation.imu.inertial.accel_factor_sigma`
         clipped to [``min_accel_sigma_mps2``, ``accel_sigma_mps2``] (the ceiling wins), else
         ``accel_sigma_mps2``."""
         if not self.adapt_accel_sigma:

@@ -32,8 +32,8 @@ from lhgraph.estimation.graph.optimizer import (
 )
 from lhgraph.estimation.graph.options import FEW_DIODE_CALIBRATION, FewDiodeStop, GraphOptions
 from lhgraph.estimation.graph.variables import STATION_POSE, VariableLayout, initial_values
-from lhgraph.estimation.imu_calibration import fit_imu_calibration
-from lhgraph.estimation.inertial import InertialData, inertial_data, initial_gravity
+from lhgraph.estimation.imu.calibration import fit_imu_calibration
+from lhgraph.estimation.imu.inertial import InertialData, inertial_data, initial_gravity
 from lhgraph.estimation.init import Initialiser
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp_kabsch import Initialisation, PnPKabschInitialiser
@@ -85,8 +85,8 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     :func:`retime_cycles`). ``imu``: the receiver's IMU stream (board frame, the angles'
     clock): the light-only solution is refined by a second optimisation with IMU factors
     (``options.imu_factor_kind``: GTSAM's combined factors,
-    :mod:`lhgraph.estimation.graph.combined_imu`, or the twist factors,
-    :mod:`lhgraph.estimation.inertial`), the IMU biases and the world's gravity estimated
+    :mod:`lhgraph.estimation.imu.combined`, or the twist factors,
+    :mod:`lhgraph.estimation.imu.inertial`), the IMU biases and the world's gravity estimated
     with the stations; with ``imu_factors = "auto"``, combined factors that raise the light's
     median angle residual more than ``IMU_DISAGREEMENT`` times (the real Crazyflie LH1 log:
     37 -> 257 urad, its deck's accelerometer misfits ~10x its readings' noise) are replaced

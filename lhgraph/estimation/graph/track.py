@@ -33,7 +33,7 @@ from lhgraph.estimation.graph.optimizer import LMParams, OptimizerResult, levenb
 from lhgraph.estimation.graph.options import FEW_DIODE_TRACKING, GraphOptions
 from lhgraph.estimation.graph.solver import graph_preparation, resolve_estimates
 from lhgraph.estimation.graph.variables import BOARD_POSE, initial_values
-from lhgraph.estimation.inertial import inertial_data, start_with_imu
+from lhgraph.estimation.imu.inertial import inertial_data, start_with_imu
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp import board_poses
 from lhgraph.estimation.init.pnp_kabsch import (
@@ -236,7 +236,7 @@ def track(board: Board, angles: Angles, stations: Stations,
     file's); ``pose_solver`` the per-measurement PnP of a many-diode board (default: planar
     homography; few-diode data starts from :meth:`FewDiodeInitialiser.with_stations`);
     ``imu`` the receiver's IMU stream (board frame, the angles' clock): gyro and
-    accelerometer factors join the graph (:mod:`lhgraph.estimation.inertial`), the initial
+    accelerometer factors join the graph (:mod:`lhgraph.estimation.imu.inertial`), the initial
     angular rates are the gyro's, and the IMU bias and the world's gravity are estimated."""
     options = options or GraphOptions()
     t0 = time.perf_counter()

@@ -23,9 +23,9 @@ IMU bias (k)    ``b``   6    accelerometer (m/s^2) and gyro (rad/s) bias at swee
 ==============  ======  ===  ============================================================
 
 Gravity exists only when the graph has IMU factors. With the twist factors
-(:mod:`lhgraph.estimation.inertial`, ``imu_factors = "twist"``) so does the one IMU bias
+(:mod:`lhgraph.estimation.imu.inertial`, ``imu_factors = "twist"``) so does the one IMU bias
 ``i`` and, when the options ask for it (``gyro_scale_sigma``, ...), the calibration; with
-GTSAM's combined factors (:mod:`lhgraph.estimation.graph.combined_imu`) a velocity and a
+GTSAM's combined factors (:mod:`lhgraph.estimation.imu.combined`) a velocity and a
 bias per state instead.
 """
 

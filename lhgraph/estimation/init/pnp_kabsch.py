@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
-from lhgraph.estimation.init.imu_bridge import bridged_relative_pose
+from lhgraph.estimation.imu.bridge import bridged_relative_pose
 from lhgraph.estimation.init.pnp import PnPResult
 from lhgraph.estimation.init.twins import chosen_path, consistent_path, twin_path
 from lhgraph.estimation.problem import GraphProblem
@@ -207,7 +207,7 @@ def join_paths(board: Board, problem: GraphProblem, paths: list[tuple[Array, Arr
     is its parent's times the link. ``matches``: the paths' :func:`pair_matches` when the
     caller has them already. ``imu``: the receiver's IMU stream (board frame, the paths'
     clock); a station no placed station saw the board with at the same moments is then
-    joined to the reference through it (:func:`~lhgraph.estimation.init.imu_bridge.
+    joined to the reference through it (:func:`~lhgraph.estimation.imu.bridge.
     bridged_relative_pose`: moments up to 0.6 s apart bridged by dead reckoning; its overlap
     counts 0)."""
     t_ref = paths[0][0]

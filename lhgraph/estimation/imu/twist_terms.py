@@ -1,6 +1,6 @@
 """The IMU factors' residuals and Jacobians at the batch graph's evaluated point, vectorised:
 :class:`ImuTerms`, held by :class:`~lhgraph.estimation.graph.evaluator.FactorEvaluator` when
-the graph has IMU factors (:mod:`lhgraph.estimation.inertial`).
+the graph has IMU factors (:mod:`lhgraph.estimation.imu.inertial`).
 
 Variables read: the IMU bias ``I(0)``, the gravity ``N(0)`` and, when the options ask for it,
 the IMU calibration ``C(0)`` (per-axis gyro scale error ``s``, time offset ``tau``, rotation
@@ -38,7 +38,7 @@ from lhgraph.estimation.graph.variables import (
     IMU_CALIBRATION,
     VariableLayout,
 )
-from lhgraph.estimation.inertial import GRAVITY_SIGMA_MPS2, InertialData, gyro_reading_sigma
+from lhgraph.estimation.imu.inertial import GRAVITY_SIGMA_MPS2, InertialData, gyro_reading_sigma
 from lhgraph.estimation.residuals import accel_residuals, gyro_residuals
 from lhgraph.geometry.transforms import skew, so3_exp, so3_log, so3_right_jacobian
 from lhgraph.io.imu import STANDARD_GRAVITY_MPS2

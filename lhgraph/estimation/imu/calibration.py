@@ -1,5 +1,5 @@
 """The IMU's calibration found from a light-only solution, for IMU factors that cannot solve
-it themselves (GTSAM's combined factors, :mod:`lhgraph.estimation.graph.combined_imu`).
+it themselves (GTSAM's combined factors, :mod:`lhgraph.estimation.imu.combined`).
 
 The light gives the board's mean angular rate ``omega_k`` (rad/s, board frame) over a short
 window from every state; the gyro, read ``tau`` later on the light's clock (its stamps run

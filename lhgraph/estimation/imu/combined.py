@@ -11,7 +11,7 @@ so its up is unknown): position, velocity and rotation change of the step, and t
 random walk over it.
 
 The readings' noise: each axis's white noise from the stream itself
-(:func:`~lhgraph.estimation.inertial.reading_noise`, the largest axis) times
+(:func:`~lhgraph.estimation.imu.inertial.reading_noise`, the largest axis) times
 ``imu_noise_factor``, as a density (``sigma sqrt(period)``); the bias walks
 ``gyro_bias_walk`` / ``accel_bias_walk``. A step the stream does not cover (a gap longer
 than ``imu_max_gap_s``, or no time between the states) gets a bias random walk only
@@ -19,13 +19,13 @@ than ``imu_max_gap_s``, or no time between the states) gets a bias random walk o
 velocity prior (:data:`FREE_VELOCITY_SIGMA_MPS`), so that no variable is left undetermined.
 A zero-mean prior on the first bias (:data:`BIAS_PRIOR_SIGMAS`, a MEMS part's turn-on bias
 and more) and one factor on the gravity's magnitude (the only callback: the norm, near
-standard gravity, :data:`~lhgraph.estimation.inertial.GRAVITY_SIGMA_MPS2`) complete it.
+standard gravity, :data:`~lhgraph.estimation.imu.inertial.GRAVITY_SIGMA_MPS2`) complete it.
 
 The IMU is at the board origin in the board frame (``imu.csv``'s convention); its
 calibration (gyro scale, time offset, frame) is not a variable of these factors: the twist
-factors (:mod:`lhgraph.estimation.graph.imu_terms`) solve it in the graph, and for these
+factors (:mod:`lhgraph.estimation.imu.twist_terms`) solve it in the graph, and for these
 :func:`~lhgraph.estimation.graph.solver.solve_graph` finds it from the light-only solution
-(:mod:`lhgraph.estimation.imu_calibration`) and corrects the stream.
+(:mod:`lhgraph.estimation.imu.calibration`) and corrects the stream.
 
 The specific force's half turn: under a held body-frame reading, the nav-frame force over a
 piece is ``R(start) Exp(omega (tau - start)) f``, on average the turn to the piece's middle;
@@ -49,7 +49,7 @@ from lhgraph.estimation.graph.variables import (
     IMU_VELOCITY,
     VariableLayout,
 )
-from lhgraph.estimation.inertial import (
+from lhgraph.estimation.imu.inertial import (
     GRAVITY_SIGMA_MPS2,
     gravity_magnitude_residual,
     gyro_reading_sigma,
@@ -151,8 +151,8 @@ def preintegrate(stream: ImuStream, state_time: Array, options: GraphOptions) ->
 
 def gravity_magnitude_factor() -> gtsam.CustomFactor:
     """The factor holding the gravity vector's norm near standard gravity (noise
-    :data:`~lhgraph.estimation.inertial.GRAVITY_SIGMA_MPS2`;
-    :func:`~lhgraph.estimation.inertial.gravity_magnitude_residual`), for both kinds of IMU
+    :data:`~lhgraph.estimation.imu.inertial.GRAVITY_SIGMA_MPS2`;
+    :func:`~lhgraph.estimation.imu.inertial.gravity_magnitude_residual`), for both kinds of IMU
     factors."""
 
     def error(_f: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> Array:
