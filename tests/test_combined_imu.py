@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 
 from lhgraph.errors import InputError
-from lhgraph.estimation.imu.combined import RESIDUAL_GROUPS, preintegrate
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.graph.variables import (
@@ -28,6 +27,7 @@ from lhgraph.estimation.graph.variables import (
     IMU_VELOCITY,
     VariableLayout,
 )
+from lhgraph.estimation.imu.combined import RESIDUAL_GROUPS, preintegrate
 from lhgraph.estimation.metrics import station_errors
 from lhgraph.io.imu import ImuStream
 from lhgraph.sim.imu import ImuConfig, simulate_imu

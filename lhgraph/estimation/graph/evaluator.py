@@ -17,8 +17,6 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.estimation.imu.combined import CombinedImu
-from lhgraph.estimation.imu.twist_terms import ImuTerms
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import (
@@ -31,7 +29,9 @@ from lhgraph.estimation.graph.variables import (
     SWEEP_OFFSET,
     VariableLayout,
 )
+from lhgraph.estimation.imu.combined import CombinedImu
 from lhgraph.estimation.imu.inertial import InertialData
+from lhgraph.estimation.imu.twist_terms import ImuTerms
 from lhgraph.estimation.problem import GraphProblem
 from lhgraph.estimation.residuals import (
     bearing_residuals,

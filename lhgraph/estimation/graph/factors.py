@@ -34,7 +34,6 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.estimation.imu.combined import CombinedImu, gravity_magnitude_factor
 from lhgraph.estimation.graph.evaluator import SCALE_SIGMA_M2, FactorError, FactorEvaluator
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
@@ -50,6 +49,7 @@ from lhgraph.estimation.graph.variables import (
     diode_bias_family,
     sensor_offset_family,
 )
+from lhgraph.estimation.imu.combined import CombinedImu, gravity_magnitude_factor
 from lhgraph.estimation.imu.inertial import InertialData
 from lhgraph.estimation.problem import GraphProblem
 

@@ -27,8 +27,8 @@ import gtsam
 import numpy as np
 
 from lhgraph.estimation.graph.evaluator import FactorEvaluator
-from lhgraph.estimation.imu.twist_terms import ImuTerms
 from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.imu.twist_terms import ImuTerms
 from lhgraph.estimation.spread import robust_sigma
 
 Progress = Callable[[str], None]
