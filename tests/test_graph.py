@@ -219,10 +219,10 @@ def test_numpy_cost_is_the_graph_error(loss):
     options = GraphOptions(loss=loss)
     _, graph, ev, values = _graph(sim, options)
     assert ev.cost(values) == pytest.approx(graph.error(values), rel=1e-12)
-    ev.scale_motion_prior(0.3)
-    ev.scale_bearing_noise(2.0)
+    ev.motion.scale(0.3)
+    ev.bearing.scale_noise(2.0)
     assert ev.cost(values) == pytest.approx(graph.error(values), rel=1e-12)
-    assert np.abs(ev.whitened_bearing_residuals()).max() > 3 * options.huber_k
+    assert np.abs(ev.bearing.whitened_residuals()).max() > 3 * options.huber_k
 
 
 def test_rescaled_linearisation_is_the_one_made_at_those_levels():
@@ -234,8 +234,8 @@ def test_rescaled_linearisation_is_the_one_made_at_those_levels():
     options = GraphOptions()
     _, graph, ev, values = _graph(sim, options)
     first, _ = graph.linearize(values).jacobian()  # the Jacobians at the first levels
-    ev.scale_motion_prior(0.3)
-    ev.scale_bearing_noise(2.0)
+    ev.motion.scale(0.3)
+    ev.bearing.scale_noise(2.0)
     levels = dataclasses.replace(options, angle_sigma_rad=options.angle_sigma_rad * np.sqrt(2.0),
                                  accel_psd_rot=options.accel_psd_rot * 0.3,
                                  accel_psd_pos=options.accel_psd_pos * 0.3)
@@ -285,7 +285,7 @@ def test_diode_biases_are_estimated_with_the_stations():
         for i in ev.layout.indices(family):
             values.update(family.key(i), rng.normal(0.0, 1e-4, family.dim))
     assert ev.cost(values) == pytest.approx(graph.error(values), rel=1e-12)
-    assert np.abs(ev.sensor_offsets()).max() > 0
+    assert np.abs(ev.corrections.sensor_offsets()).max() > 0
 
 
 @pytest.mark.parametrize("kind", ["cauchy", "huber"])
@@ -328,12 +328,12 @@ def test_motion_prior_redundancy_against_the_dense_hat_matrix():
     lin = graph.linearize(values)
     A, _ = lin.jacobian()
     bounds = np.cumsum([0] + [lin.at(i).rows() for i in range(lin.size())])
-    rows = np.concatenate([np.arange(bounds[i], bounds[i + 1]) for i in ev.motion_factors])
+    rows = np.concatenate([np.arange(bounds[i], bounds[i + 1]) for i in ev.motion.indices])
     A_m = A[rows]
     exact = len(rows) - np.trace(A_m @ np.linalg.solve(A.T @ A, A_m.T))
-    [(n, dof)] = redundancy(lin, [ev.motion_factors], ev.layout.elimination_ordering(),
+    [(n, dof)] = redundancy(lin, [ev.motion.indices], ev.layout.elimination_ordering(),
                             probes=16)
-    assert n == len(rows) == 12 * len(ev.motion_factors)
+    assert n == len(rows) == 12 * len(ev.motion.indices)
     assert 0 < exact < n
     assert dof == pytest.approx(exact, rel=0.15)
 

@@ -341,20 +341,20 @@ def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
         for sign in (1, -1):
             v = gtsam_values_with(values, key, c0 + sign * h[j] * np.eye(dim)[j])
             ev.evaluate(v)
-            residuals.append(ev.inertial_residuals())
+            residuals.append(ev.twist_imu.terms.residuals())
         numerical.append([(p - m) / (2 * h[j]) for p, m in zip(*residuals, strict=True)])
     ev.evaluate(values)
     for rows, which in ((gyro_rows, 0), (accel_rows, 1)):
         states = np.flatnonzero(data.rate_ok if which == 0 else data.force_ok)
         for i, k in zip(rows[::25], states[::25], strict=False):
-            sigma = options.gyro_sigma_rad_s if which == 0 else ev.imu.accel_sigmas[k]
+            sigma = options.gyro_sigma_rad_s if which == 0 else ev.twist_imu.terms.accel_sigmas[k]
             A = lin.at(i).getA()[:, -dim:] * sigma  # unwhitened
             num = np.stack([numerical[j][which][k] for j in range(dim)], axis=1)
             np.testing.assert_allclose(A, num, atol=1e-4 * max(1.0, np.abs(num).max()))
     # the accelerometer factor over k -> k + 1 by state k's and state k + 1's angular rate
     # (the twist's first three columns after each pose's six)
     for i, k in zip(accel_rows[5::40], np.flatnonzero(data.force_ok)[5::40], strict=False):
-        A = lin.at(i).getA() * ev.imu.accel_sigmas[k]
+        A = lin.at(i).getA() * ev.twist_imu.terms.accel_sigmas[k]
         for state, columns in ((k, slice(6, 9)), (k + 1, slice(18, 21))):
             twist_key = BOARD_TWIST.key(int(state))
             w0 = values.atVector(twist_key)
@@ -364,7 +364,7 @@ def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
                 for sign in (1, -1):
                     ev.evaluate(gtsam_values_with(values, twist_key,
                                                   w0 + sign * 1e-6 * np.eye(6)[j]))
-                    residuals.append(ev.inertial_residuals()[1][k])
+                    residuals.append(ev.twist_imu.terms.residuals()[1][k])
                 num.append((residuals[0] - residuals[1]) / 2e-6)
             num = np.stack(num, axis=1)
             np.testing.assert_allclose(A[:, columns], num,
@@ -458,9 +458,9 @@ def test_preintegrated_gyro_jacobians_match_numerical(miscalibrated_imu):
     values = initial_values(ev.layout, init, initial_gravity(data, init.X))
     values.update(IMU_BIAS.key(0), np.array([0.02, -0.01, 0.03, 0.0, 0.0, 0.0]))
     ev.evaluate(values)
-    ev._jacobians()
-    H0, H1, Hb = (H.copy() for H in ev.imu.Hp)
-    steps = ev.imu.preintegrated
+    ev.twist_imu.jacobians()
+    H0, H1, Hb = (H.copy() for H in ev.twist_imu.terms.Hp)
+    steps = ev.twist_imu.terms.preintegrated
     assert len(steps) > 0.9 * problem.n_states
     h = 1e-6
     for i in range(0, len(steps), 40):
@@ -479,7 +479,7 @@ def test_preintegrated_gyro_jacobians_match_numerical(miscalibrated_imu):
                     else:
                         v.update(key, values.atPose3(key).retract(d))
                     ev.evaluate(v)
-                    out.append(ev.imu.p[i].copy())
+                    out.append(ev.twist_imu.terms.p[i].copy())
                 num[:, j] = (out[0] - out[1]) / (2 * h)
             np.testing.assert_allclose(H[i], num, atol=1e-5)
     ev.evaluate(values)

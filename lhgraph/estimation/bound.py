@@ -80,9 +80,9 @@ def information_bound(problem: GraphProblem, truth: Initialisation, options: Gra
     graph, ev = build_graph(problem, options)
     values = initial_values(ev.layout, truth)
     ev.evaluate(values)
-    factor = ev.motion_chi2_per_dof() if true_motion_prior else 1.0
+    factor = ev.motion.chi2_per_dof() if true_motion_prior else 1.0
     if true_motion_prior:
-        ev.scale_motion_prior(factor)
+        ev.motion.scale(factor)
     linear = graph.linearize(values)
     if known_path:
         held = gtsam.noiseModel.Isotropic.Sigma(6, KNOWN_SIGMA)

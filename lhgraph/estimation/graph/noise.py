@@ -112,7 +112,7 @@ class NoiseAdaptation:
         """One variance-component update at the evaluator's current point; whether anything
         changed (False: both levels match the data or sit at their bounds)."""
         ev, options = self.evaluator, self.options
-        chi2 = ev.motion_chi2_per_dof()
+        chi2 = ev.motion.chi2_per_dof()
         redundant = options.motion_prior_estimate == "redundancy"
         groups = self._redundancy_groups()
         if groups and self._redundancy is None:
@@ -124,20 +124,21 @@ class NoiseAdaptation:
         if not options.adapt_motion_prior:
             ratio = 1.0
         # a model misfit shows up as board jitter: never loosen the prior beyond the cap
-        ratio = min(ratio, options.max_psd_factor / ev.motion_psd_factor())
+        ratio = min(ratio, options.max_psd_factor / ev.motion.psd_factor())
         if not redundant:
             # nor stiffen it below the floor: a real board's motion is not exactly WNOA, and
             # an over-stiff prior trades the station's accuracy for smoothness
-            ratio = max(ratio, options.min_psd_factor / ev.motion_psd_factor())
+            ratio = max(ratio, options.min_psd_factor / ev.motion.psd_factor())
         # the diodes' noise from the residuals (robust: MAD), never below the configured
         # sigma (the 2 MHz quantisation) nor above max_sigma_factor times it
-        sigma_hat = robust_sigma(ev.bearing_residuals(), about_zero=True)
+        sigma_hat = robust_sigma(ev.bearing.residuals(), about_zero=True)
         noise = 1.0
         if options.adapt_angle_sigma:
             noise = float(np.clip(sigma_hat, options.angle_sigma_rad,
                                   options.max_sigma_factor * options.angle_sigma_rad)
-                          / ev.angle_sigma())**2
-        imu = ev.preintegrated_gyro()
+                          / ev.bearing.angle_sigma())**2
+        twist = ev.twist_imu
+        imu = None if twist is None else twist.preintegrated()
         gyro = 1.0 if imu is None else self._gyro_ratio(imu)
         accel = self._accel_ratio() if "accel" in groups else 1.0
         if self.progress:
@@ -148,13 +149,14 @@ class NoiseAdaptation:
                              f"{imu.preintegration_sigma() * np.sqrt(gyro):.2g} rad/s")
                           + ("" if "accel" not in groups else
                              f"; accelerometer noise "
-                             f"{ev.imu.accel_sigma() * np.sqrt(accel):.2g} m/s^2"))
+                             f"{twist.terms.accel_sigma() * np.sqrt(accel):.2g} m/s^2"))
         if all(0.8 < r < 1.25 for r in (ratio, noise, gyro, accel)):
             return False
-        ev.scale_motion_prior(ratio)
-        ev.scale_bearing_noise(noise)
-        ev.scale_preintegration_noise(gyro)
-        ev.scale_accel_noise(accel)
+        ev.motion.scale(ratio)
+        ev.bearing.scale_noise(noise)
+        if twist is not None:
+            twist.scale_preintegration_noise(gyro)
+            twist.scale_accel_noise(accel)
         self._redundancy = None
         return True
 
@@ -171,7 +173,7 @@ class NoiseAdaptation:
     def _accel_ratio(self) -> float:
         """The variance factor of the accelerometer factors: their whitened chi2 over their
         redundancy, within what keeps their median noise in the options' bounds."""
-        imu = self.evaluator.imu
+        imu = self.evaluator.twist_imu.terms
         rows, dof = self._redundancy["accel"]
         ok = imu.data.force_ok
         chi2 = float(np.sum((imu.a_scaled[ok] / imu.accel_sigmas[ok, None]) ** 2))
@@ -186,10 +188,10 @@ class NoiseAdaptation:
         ev, options = self.evaluator, self.options
         groups = {}
         if options.motion_prior_estimate == "redundancy" and options.adapt_motion_prior:
-            groups["motion"] = ev.motion_factors
-        if (options.accel_sigma_estimate == "redundancy" and ev.imu is not None
-                and len(ev.accel_factors)):
-            groups["accel"] = ev.accel_factors
+            groups["motion"] = ev.motion.indices
+        if (options.accel_sigma_estimate == "redundancy" and ev.twist_imu is not None
+                and len(ev.twist_imu.accel)):
+            groups["accel"] = ev.twist_imu.accel
         return groups
 
     def _redundancies(self, lin: gtsam.GaussianFactorGraph, groups: dict[str, range]

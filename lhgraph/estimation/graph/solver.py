@@ -226,8 +226,8 @@ def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation
     graph, ev = build_graph(problem, options, inertial=inertial)
     values = initial_values(ev.layout, init, gravity)
     if levels is not None:
-        ev.scale_bearing_noise((levels.angle_sigma() / ev.angle_sigma()) ** 2)
-        ev.scale_motion_prior(levels.motion_psd_factor() / ev.motion_psd_factor())
+        ev.bearing.scale_noise((levels.bearing.angle_sigma() / ev.bearing.angle_sigma()) ** 2)
+        ev.motion.scale(levels.motion.psd_factor() / ev.motion.psd_factor())
     try:
         if options.solver == "lm":
             hook = (NoiseAdaptation(graph, ev, options, progress)
@@ -347,7 +347,7 @@ def resolve_estimates(options: GraphOptions, few: bool, inertial: bool) -> Graph
 def _median_residual(ev: FactorEvaluator, values: gtsam.Values) -> float:
     """Median absolute angle residual (rad) of ``ev``'s hits at ``values``."""
     ev.evaluate(values)
-    return float(np.median(np.abs(ev.bearing_residuals())))
+    return float(np.median(np.abs(ev.bearing.residuals())))
 
 
 def _chain(slot: int, parents: list[int]) -> list[int]:
@@ -390,9 +390,8 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
     h = problem.hits
     rows = problem.hit_rows
     residuals = Residuals(angles.time[rows], angles.lighthouse[rows], h.axis,
-                          angles.sensor[rows], -ev.bearing_residuals(), ev.robust_weights())
+                          angles.sensor[rows], -ev.bearing.residuals(), ev.bearing.robust_weights())
     timings["total"] = time.perf_counter() - t0
-    psd_rot, psd_pos = ev.motion_psd()
     return SolveResult(
         method="graph",
         stations=Stations(reference, out),
@@ -404,14 +403,11 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
         timings_s=timings,
         warnings=warnings,
         error_history=fit.error_history,
-        diagnostics={"accel_psd_rot": psd_rot, "accel_psd_pos": psd_pos,
-                     "motion_chi2_per_dof": ev.motion_chi2_per_dof(),
-                     "angle_sigma_rad": ev.angle_sigma()} | ev.inertial_summary()
-                    | (diagnostics or {}),
+        diagnostics=ev.summary() | (diagnostics or {}),
         gravity_world=ev.gravity(),
-        diode_bias_rad=({sid: b.reshape(2, -1).copy()
-                         for sid, b in zip(problem.station_ids, ev.diode_biases(), strict=True)}
+        diode_bias_rad=({sid: b.reshape(2, -1).copy() for sid, b in zip(
+                            problem.station_ids, ev.corrections.diode_biases(), strict=True)}
                         if options.diode_bias_sigma_rad > 0 else None),
-        sensor_offset_m=(ev.sensor_offsets().copy() if options.sensor_offset_sigma_m > 0
-                         else None),
+        sensor_offset_m=(ev.corrections.sensor_offsets().copy()
+                         if options.sensor_offset_sigma_m > 0 else None),
     )

@@ -10,9 +10,9 @@ board states, bearing factors, offset priors and motion priors to GTSAM's
 estimate. Board states older than ``lag_s`` are marginalised; the station poses never are.
 Tracking (``stations`` given, :func:`track_stream`): every station is held at its known pose,
 no station variable, and each estimate carries the board states the update added.
-The factors come from the batch graph's :class:`FactorBuilder`; inside iSAM2 each factor
-callback evaluates only its own sweep (GTSAM copies the Values for every Python callback, so
-the window, not the capture, sets the cost).
+The factors are the batch graph's (:mod:`lhgraph.estimation.graph.families`); inside iSAM2
+each factor callback evaluates only its own sweep (GTSAM copies the Values for every Python
+callback, so the window, not the capture, sets the cost).
 """
 
 from __future__ import annotations
@@ -27,7 +27,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
-from lhgraph.estimation.graph.factors import FactorBuilder
+from lhgraph.estimation.graph.families.bearing import bearing_factor, bearing_keys, offset_prior
+from lhgraph.estimation.graph.families.motion import motion_factor
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
@@ -169,8 +170,9 @@ class StreamingSolver:
         self._last: tuple[float, Array, Array] | None = None  # time, pose, twist of last state
         self._psd = (self.options.accel_psd_rot, self.options.accel_psd_pos)
         self._sigma = self.options.angle_sigma_rad  # the warm-up solve's learned value later
-        self._factors = FactorBuilder(RobustLoss(self.options.loss, self.options.huber_k),
-                                      self.options.sweep_offset_sigma_rad)
+        self._estimator = RobustLoss(self.options.loss, self.options.huber_k).estimator()
+        self._offset_noise = gtsam.noiseModel.Isotropic.Sigma(
+            1, self.options.sweep_offset_sigma_rad)
 
     def add(self, chunk: Angles) -> StreamingEstimate | None:
         """Add the hits of one or more complete sync cycles; returns the current estimate
@@ -284,12 +286,13 @@ class StreamingSolver:
             sweep = BearingHits(np.zeros(b - a, dtype=np.int64), h.station[a:b], h.s_board[a:b],
                                 h.axis[a:b], h.dt[a:b], h.angle[a:b])
             fixed = self._T_world_lh[slot] if tracking else None
-            graph.add(self._factors.bearing(
-                k, None if tracking or slot == 0 else slot, int(b - a), self._sigma,
+            graph.add(bearing_factor(
+                bearing_keys(k, None if tracking or slot == 0 else slot), int(b - a),
+                self._sigma, self._estimator,
                 _bearing_error(sweep, k, slot, problem.models[slot], fixed)))
-            graph.add(self._factors.offset_prior(k))
+            graph.add(offset_prior(k, self._offset_noise))
             Q = wnoa_covariance(np.array([dt]), *self._psd)[0]
-            graph.add(self._factors.motion(k - 1, Q, _motion_error(k - 1, dt)))
+            graph.add(motion_factor(k - 1, Q, _motion_error(k - 1, dt)))
         t_now = self._last[0]
         for slot in range(1, 1 if tracking else len(self.station_ids)):
             stamps.insert((STATION_POSE.key(slot), t_now))

@@ -279,15 +279,13 @@ def track(board: Board, angles: Angles, stations: Stations,
                           "determined by the data") from err
     ev.evaluate(fit.values)
     timings["optimise"] = time.perf_counter() - t0 - timings["initialise"]
-    psd_rot, psd_pos = ev.motion_psd()
     return TrackResult(
         path=path_of(problem, ev.board_poses().copy(), sigma),
         initialised=n_pnp,
         status=fit.status.value,
         iterations=fit.iterations,
         timings_s=timings,
-        diagnostics={"accel_psd_rot": psd_rot, "accel_psd_pos": psd_pos,
-                     "angle_sigma_rad": ev.angle_sigma()} | ev.inertial_summary(),
+        diagnostics=ev.summary(),
         imu_bias=ev.imu_bias(),
         gravity=ev.gravity(),
     )
