@@ -516,7 +516,7 @@ def test_an_undetermined_variable_is_named_as_the_user_knows_it():
     # GTSAM's indeterminate-system error names a key (Symbol: x12); the solver's one line
     # says which board state that is (time, station, hits, the gaps around it), or which
     # station, and falls back to the general sentence when the message names no variable
-    from lhgraph.estimation.graph.solver import undetermined
+    from lhgraph.estimation.graph.batch import undetermined
 
     sim = _capture("default", duration_s=1.0)
     problem, _, ev, _ = _graph(sim, GraphOptions())

@@ -20,7 +20,9 @@ import pytest
 
 from lhgraph.cli import main
 from lhgraph.errors import InputError
+from lhgraph.estimation.graph import batch
 from lhgraph.estimation.graph.factors import build_graph
+from lhgraph.estimation.graph.optimizer import isam2_batch
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.streaming import track_stream
 from lhgraph.estimation.graph.track import TrackedPath, track, tracking_problem
@@ -153,3 +155,27 @@ def test_bad_inputs_one_line_exit_2_nothing_written(tmp_path, capsys):
         assert not out.exists()
     with pytest.raises(InputError, match="only0.toml: no"):
         track_files(tmp_path / "board.toml", tmp_path / "angles.csv", only0, out)
+
+
+def test_track_honours_isam2(board32, monkeypatch):
+    """One build-and-optimise path: tracking takes the solver option like the calibration."""
+    lm = track(board32.board, board32.angles, board32.truth)
+    calls = []
+    monkeypatch.setattr(batch, "isam2_batch",
+                        lambda *args, **kw: calls.append(1) or isam2_batch(*args, **kw))
+    isam = track(board32.board, board32.angles, board32.truth,
+                 options=GraphOptions(solver="isam2"))
+    gap = np.linalg.norm(isam.path.trajectory.T_world_board[:, :3, 3]
+                         - lm.path.trajectory.T_world_board[:, :3, 3], axis=1)
+    assert calls and np.median(gap) < 2e-4
+    assert np.median(position_errors(board32, isam.path)) < 0.5e-3
+
+
+@pytest.mark.parametrize("name, value", [("diode_bias_sigma_rad", 1e-4),
+                                         ("sensor_offset_sigma_m", 1e-3),
+                                         ("rest_keep_every", 3)])
+def test_streaming_refuses_what_it_cannot_honour(board32, name, value):
+    with pytest.raises(InputError, match=name):
+        list(track_stream(board32.board, board32.angles, board32.truth,
+                          options=GraphOptions(**{name: value})))
+

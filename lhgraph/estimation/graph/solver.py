@@ -8,8 +8,6 @@ problem (:mod:`lhgraph.estimation.problem`) -> initial values (an
 
 from __future__ import annotations
 
-import functools
-import re
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -19,21 +17,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
+from lhgraph.estimation.graph.batch import Watch, build_and_optimise, station_covariances
 from lhgraph.estimation.graph.evaluator import FactorEvaluator
-from lhgraph.estimation.graph.factors import build_graph
-from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import (
-    Linearized,
-    LMParams,
-    NoiseHook,
     OptimizerResult,
-    isam2_batch,
-    levenberg_marquardt,
 )
 from lhgraph.estimation.graph.options import FEW_DIODE_CALIBRATION, FewDiodeStop, GraphOptions
-from lhgraph.estimation.graph.variables import STATION_POSE, VariableLayout, initial_values
 from lhgraph.estimation.imu.calibration import fit_imu_calibration
-from lhgraph.estimation.imu.inertial import InertialData, inertial_data, initial_gravity
+from lhgraph.estimation.imu.inertial import inertial_data, initial_gravity
 from lhgraph.estimation.init import Initialiser
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp_kabsch import Initialisation, PnPKabschInitialiser
@@ -126,7 +117,8 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     if progress:
         progress(f"initialised {problem.n_states} board states, {len(problem.hits.angle)} hits")
     t1 = time.perf_counter()
-    fit, ev, cov = _optimise(problem, resolve_estimates(options, few, False), init, progress)
+    fit, ev, cov = build_and_optimise(problem, resolve_estimates(options, few, False), init,
+                                      station_covariances, progress)
     notes = []
     extra = {} if rests is None else {"rest_hits_dropped": float(rests.hits_dropped)}
     if imu is not None:
@@ -155,8 +147,9 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         watch = (Disagreement.watch(limit)
                  if kind == "combined" and options.imu_factors == "auto" else None)
         try:
-            fit, ev, cov = _optimise(problem, options, refined, progress, inertial, gravity,
-                                     light_ev, watch)
+            fit, ev, cov = build_and_optimise(
+                problem, options, refined, station_covariances, progress, inertial=inertial,
+                gravity=gravity, levels=light_ev, watch=watch)
             imu_median, spent = _median_residual(ev, fit.values), fit.iterations
         except Disagreement as stop:
             imu_median, spent = stop.median_rad, stop.steps
@@ -170,8 +163,9 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
                 progress(notes[-1])
             options = replace(options, imu_factors="twist")
             light = replace(light, iterations=light.iterations + spent)
-            fit, ev, cov = _optimise(problem, options, refined, progress, inertial, gravity,
-                                     light_ev)
+            fit, ev, cov = build_and_optimise(
+                problem, options, refined, station_covariances, progress, inertial=inertial,
+                gravity=gravity, levels=light_ev)
             imu_median = _median_residual(ev, fit.values)
         if imu_median > limit:
             notes.append(f"the IMU disagrees with the light: its factors raised the median "
@@ -197,7 +191,7 @@ class Disagreement(Exception):
 
     @staticmethod
     def watch(limit_rad: float, after_steps: int = DISAGREEMENT_STEPS
-              ) -> Callable[[FactorEvaluator, gtsam.Values], None]:
+              ) -> Watch:
         """A check, after every accepted LM step, that raises :class:`Disagreement` from the
         ``after_steps``-th on when the evaluator's median angle residual exceeds
         ``limit_rad``."""
@@ -210,80 +204,6 @@ class Disagreement(Exception):
                 raise Disagreement(median, steps)
 
         return check
-
-
-def _optimise(problem: GraphProblem, options: GraphOptions, init: Initialisation,
-              progress: Progress | None, inertial: InertialData | None = None,
-              gravity: Array | None = None, levels: FactorEvaluator | None = None,
-              watch: Callable[[FactorEvaluator, gtsam.Values], None] | None = None
-              ) -> tuple[OptimizerResult, FactorEvaluator, dict[int, Array]]:
-    """The graph of ``problem`` (with IMU factors if ``inertial``) optimised from ``init``
-    (and ``gravity``), its noise levels starting at those ``levels`` adapted to (a previous
-    stage's evaluator; default: the options'): the optimiser's result, the evaluator and the
-    stations' marginal covariances by slot. ``watch`` is called with the evaluator and the
-    values after every accepted LM step, before the noise hook (:meth:`Disagreement.watch`:
-    its exception ends the optimisation)."""
-    graph, ev = build_graph(problem, options, inertial=inertial)
-    values = initial_values(ev.layout, init, gravity)
-    if levels is not None:
-        ev.bearing.scale_noise((levels.bearing.angle_sigma() / ev.bearing.angle_sigma()) ** 2)
-        ev.motion.scale(levels.motion.psd_factor() / ev.motion.psd_factor())
-    try:
-        if options.solver == "lm":
-            hook = (NoiseAdaptation(graph, ev, options, progress)
-                    if NoiseAdaptation.enabled(options) else None)
-            if watch is not None:
-                hook = functools.partial(_watched, watch, ev, hook)
-            fit = levenberg_marquardt(graph, values, ev.cost, ev.layout,
-                                      LMParams.from_options(options), hook, progress)
-        else:
-            fit = isam2_batch(graph, values, ev.layout, options.max_iterations, progress)
-        cov = {slot: fit.covariance(STATION_POSE.key(slot))
-               for slot in ev.layout.indices(STATION_POSE)}
-    except RuntimeError as err:  # gtsam's IndeterminateLinearSystemException and kin
-        raise SolverError(undetermined(str(err), ev.layout, problem)) from err
-    return fit, ev, cov
-
-
-def _watched(watch: Callable[[FactorEvaluator, gtsam.Values], None], ev: FactorEvaluator,
-             hook: NoiseHook | None, values: gtsam.Values, linearized: Linearized | None = None
-             ) -> bool:
-    """The noise hook ``hook`` (None: none) after ``watch(ev, values)``."""
-    watch(ev, values)
-    return hook(values, linearized) if hook is not None else False
-
-
-def undetermined(message: str, layout: VariableLayout, problem: GraphProblem) -> str:
-    """One line for a GTSAM error ``message`` raised while solving the graph of ``problem``:
-    the variable it names (GTSAM: ``(Symbol: x1495)``) as the user knows it (a board state:
-    its time from the capture's first state, its station, how many hits of how many diodes it
-    has and how far the states around it are), or that some variable is not determined when
-    the message names none."""
-    found = re.search(r"Symbol: ([A-Za-z])(\d+)", message)
-    family = None if found is None else next(
-        (f for f in layout.families if f.symbol == found[1]), None)
-    if family is None:
-        first = next((line.strip() for line in message.splitlines() if line.strip()), "")
-        return (f"the linearised problem cannot be solved ({first}): some board state or "
-                "station is not determined by the data")
-    index = int(found[2])
-    what = f"{family.name} {index}"
-    if family.elimination == "chain" and index < problem.n_states:
-        t = problem.state_time
-        a, b = problem.bounds[index], problem.bounds[index + 1]
-        before = f"{t[index] - t[index - 1]:.3f} s before" if index > 0 else "none before"
-        after = (f"{t[index + 1] - t[index]:.3f} s after" if index + 1 < len(t)
-                 else "none after")
-        what += (f" (t = {t[index] - t[0]:.3f} s, station "
-                 f"{problem.station_ids[problem.state_station[index]]}: {b - a} hits of "
-                 f"{len(np.unique(problem.hit_sensor[a:b]))} diodes; the nearest states "
-                 f"{before}, {after})")
-    elif family.name == STATION_POSE.name and index < len(problem.station_ids):
-        what = f"station {problem.station_ids[index]}"
-    return (f"the linearised problem cannot be solved: {what} is not determined by the data "
-            "(GTSAM: indeterminate linear system); another robust loss, a stiffer motion "
-            "prior (a lower max_psd_factor) or leaving that stretch of the capture out may "
-            "help")
 
 
 def graph_preparation(angles: Angles, options: GraphOptions,

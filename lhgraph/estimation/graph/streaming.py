@@ -26,7 +26,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.errors import SolverError
+from lhgraph.errors import InputError, SolverError
 from lhgraph.estimation.graph.families.bearing import bearing_factor, bearing_keys, offset_prior
 from lhgraph.estimation.graph.families.motion import motion_factor
 from lhgraph.estimation.graph.loss import RobustLoss
@@ -138,6 +138,12 @@ def _isam2_params() -> gtsam.ISAM2Params:
     return params
 
 
+STREAMING_UNSUPPORTED = ("diode_bias_sigma_rad", "sensor_offset_sigma_m", "gyro_preintegration",
+                         "gyro_scale_sigma", "imu_time_offset_sigma_s",
+                         "imu_rotation_sigma_rad", "imu_position_sigma_m", "rest_keep_every")
+"""Options the streaming smoother cannot honour: refused when set, never ignored."""
+
+
 class StreamingSolver:
     """Incremental calibration of the stations in ``station_ids`` (first = reference), or,
     with ``stations``, tracking with every one of them held at its pose there (the world is
@@ -162,6 +168,13 @@ class StreamingSolver:
         if stations is not None:
             self.models = {s: stations.stations[s].model for s in self.station_ids} | self.models
         self.options = options or GraphOptions()
+        unsupported = [name for name in STREAMING_UNSUPPORTED
+                       if getattr(self.options, name) != getattr(GraphOptions(), name)]
+        if unsupported:
+            raise InputError(f"the streaming smoother has no {unsupported[0]} (its "
+                             "incremental graph holds bearings, sweep offsets and the motion "
+                             "prior only): solve in batch, or leave it at its default",
+                             where=unsupported[0])
         self.lag_s = lag_s
         self.warmup_s = warmup_s
         self._pending: list[Angles] = []

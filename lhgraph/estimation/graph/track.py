@@ -27,12 +27,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import InputError, SolverError
-from lhgraph.estimation.graph.factors import build_graph
-from lhgraph.estimation.graph.noise import NoiseAdaptation
-from lhgraph.estimation.graph.optimizer import LMParams, OptimizerResult, levenberg_marquardt
+from lhgraph.estimation.graph.batch import build_and_optimise
+from lhgraph.estimation.graph.evaluator import FactorEvaluator
+from lhgraph.estimation.graph.optimizer import OptimizerResult
 from lhgraph.estimation.graph.options import FEW_DIODE_TRACKING, GraphOptions
 from lhgraph.estimation.graph.solver import graph_preparation, resolve_estimates
-from lhgraph.estimation.graph.variables import BOARD_POSE, initial_values
+from lhgraph.estimation.graph.variables import BOARD_POSE
 from lhgraph.estimation.imu.inertial import inertial_data, start_with_imu
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp import board_poses
@@ -220,9 +220,9 @@ def largest_sigma(pose_covariances: Array) -> Array:
     return np.sqrt(np.linalg.eigvalsh(pose_covariances[:, 3:, 3:])[:, -1])
 
 
-def position_sigmas(fit: OptimizerResult, n_states: int) -> Array:
+def state_sigmas(fit: OptimizerResult, ev: FactorEvaluator) -> Array:
     """Per state, the largest position standard deviation (m) of its marginal covariance."""
-    return largest_sigma(np.stack([fit.covariance(BOARD_POSE.key(k)) for k in range(n_states)]))
+    return largest_sigma(np.stack([fit.covariance(key) for key in ev.layout.keys(BOARD_POSE)]))
 
 
 def track(board: Board, angles: Angles, stations: Stations,
@@ -266,17 +266,8 @@ def track(board: Board, angles: Angles, stations: Stations,
                  + (f" from {n_pnp} PnP poses" if n_pnp else " from planar twins")
                  + ("" if inertial is None else
                     f"; IMU factors at {int(inertial.rate_ok.sum())} states"))
-    graph, ev = build_graph(problem, options, T_world_lh, inertial)
-    values = initial_values(ev.layout, init, gravity)
-    hook = (NoiseAdaptation(graph, ev, options, progress) if NoiseAdaptation.enabled(options)
-            else None)
-    try:
-        fit = levenberg_marquardt(graph, values, ev.cost, ev.layout,
-                                  LMParams.from_options(options), hook, progress)
-        sigma = position_sigmas(fit, problem.n_states)
-    except RuntimeError as err:  # gtsam's IndeterminateLinearSystemException and kin
-        raise SolverError("the linearised path cannot be solved: some board state is not "
-                          "determined by the data") from err
+    fit, ev, sigma = build_and_optimise(problem, options, init, state_sigmas, progress,
+                                        T_world_lh, inertial, gravity)
     ev.evaluate(fit.values)
     timings["optimise"] = time.perf_counter() - t0 - timings["initialise"]
     return TrackResult(
