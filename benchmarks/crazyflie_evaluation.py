@@ -23,7 +23,7 @@ beforehand and passed in, e.g.
     lhgraph track --stations DIR/stations-cfclient.toml --angles DIR/angles.csv \
         --board crazyflie_deck --calibration DIR/ootx.toml --output DIR/track-cfclient.csv
 
-    python3 benchmarks/crazyflie_evaluation.py [--import-dir DIR] \
+    python -m benchmarks crazyflie_evaluation [--import-dir DIR] \
         [--stations NAME=FILE ...] [--track NAME=T.csv ...]
 
 Default: imports the shared log into a temporary directory and evaluates
@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import prog
 from lhgraph.geometry.kabsch import weighted_kabsch
 from lhgraph.geometry.transforms import transform_points
 from lhgraph.importers.crazyflie import import_crazyflie
@@ -185,8 +186,8 @@ def row(name: str, e: np.ndarray, d0: float, d1: float, n: int) -> str:
             + f" | {np.sqrt(np.mean(e**2)) * 1e3:.1f} | {d0 * 1e3:+.0f} / {d1 * 1e3:+.0f} |")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
     ap.add_argument("--import-dir", type=Path, help="output of lhgraph import crazyflie")
     ap.add_argument("--log", choices=sorted(LOGS), default="lh1",
                     help="the shared log imported without --import-dir (default lh1)")
@@ -195,7 +196,7 @@ def main() -> None:
     ap.add_argument("--max-gap", type=float, default=0.05, help="interpolation gap (s)")
     ap.add_argument("--output", type=Path,
                     help="default docs/results/crazyflie_evaluation.md (lh2: _lh2.md)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     suffix = "" if args.log == "lh1" else f"_{args.log}"
     args.output = args.output or ROOT / f"docs/results/crazyflie_evaluation{suffix}.md"
     start = time.perf_counter()
@@ -213,7 +214,7 @@ def main() -> None:
     geometries = dict(s.split("=", 1) for s in args.stations) or {
         "cfclient": str(args.import_dir / "stations-cfclient.toml")}
     lines = [f"# Crazyflie {args.log.upper()} log: station geometries against Qualisys", "",
-             "`python3 benchmarks/crazyflie_evaluation.py` (docs/crazyflie.md). Position error "
+             "`python -m benchmarks crazyflie_evaluation` (docs/crazyflie.md). Position error "
              "(mm) after the best rigid fit to the mocap, offsets searched +-100 ms at both "
              "ends (start / end offset in the last column, ms).", "",
              "## (b) the log's correctedAngle as crossing-beam positions", "",
@@ -252,4 +253,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())
