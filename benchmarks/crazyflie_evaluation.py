@@ -33,12 +33,12 @@ to another file.
 
 A mocap of another recording is refused (one line naming the file, exit code 2), by two
 checks: the importer's clock rate (log seconds per mocap second, from the mocap's first and
-last rows against the log's marker events) must be within 1 +- ``MAX_RATE_ERROR`` (two
-crystal clocks agree to far better; the wrong recording's mocap gives 0.49 or 1.98 on the
-shared logs), and, the one check an ``--import-dir`` allows, at least one geometry's
-positions must follow the mocap: rms error after the best rigid fit and time search at most
-``MAX_ALIGNED_RMS_M`` (the shared logs with their own mocap: 19-36 mm; with another
-recording's: 1.5 m).
+last rows against the log's marker events) must be within 1 +- ``MAX_RATE_ERROR`` (every
+shared log with its own mocap: 0.989; with the mocap of a recording of another length: 0.49
+or 1.98), and, the check that also catches another recording of the same length and the one
+an ``--import-dir`` allows, at least one geometry's positions must follow the mocap: rms
+error after the best rigid fit and time search at most ``MAX_ALIGNED_RMS_M`` (the shared logs
+with their own mocap: 19-36 mm; with another recording's: over 1 m).
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ DATA = ROOT.parent / "shared" / "data" / "bitcraze-positioning"
 LOGS = {"lh1": DATA / "lh1_crossingBeam_move" / "log02",
         "lh2": DATA / "lh2_crossingBeam_move" / "log00"}
 SEARCH_S = 0.1
-MAX_RATE_ERROR = 0.01
+MAX_RATE_ERROR = 0.05
 MAX_ALIGNED_RMS_M = 0.25
 PERCENTILES = (25, 50, 75, 90, 95)
 
