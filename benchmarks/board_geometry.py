@@ -1,7 +1,7 @@
 """Solving the board's sensor positions with the stations (``sensor_offset_sigma_m``,
 ``lhgraph solve --board-output``) on simulated captures whose board file is wrong.
 
-    python benchmarks/board_geometry.py [--seeds 6] [--errors-mm 0,0.25,0.5,1]
+    python -m benchmarks board_geometry [--seeds 6] [--errors-mm 0,0.25,0.5,1]
         [--keep-scale] [--jobs 2] [--output docs/results/board_geometry.md] [--force]
 
 For each seed (default layout, configs/simulation/default.toml, 8 s) and each board error
@@ -18,28 +18,26 @@ shows what the extra unknowns cost on an exact board.
 
 from __future__ import annotations
 
-import os
+import benchmarks._single_thread  # noqa: F401  (first: before numpy loads)
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# isort: split
 
-import argparse  # noqa: E402
-import shlex  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
-from joblib import Parallel, delayed  # noqa: E402
+import numpy as np
+from joblib import Parallel, delayed
 
-from lhgraph.estimation.graph.options import GraphOptions  # noqa: E402
-from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
-from lhgraph.geometry.kabsch import weighted_kabsch  # noqa: E402
-from lhgraph.geometry.transforms import inverse, se3_log  # noqa: E402
-from lhgraph.io.files import check_writable  # noqa: E402
-from lhgraph.model.board import with_sensor_offsets  # noqa: E402
-from lhgraph.sim.simulate import load_simulation_config, simulate  # noqa: E402
-from lhgraph.workflow.solve_config import SENSOR_OFFSET_SIGMA_M  # noqa: E402
+from benchmarks import command, prog
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.geometry.kabsch import weighted_kabsch
+from lhgraph.geometry.transforms import inverse, se3_log
+from lhgraph.io.files import check_writable
+from lhgraph.model.board import with_sensor_offsets
+from lhgraph.sim.simulate import load_simulation_config, simulate
+from lhgraph.workflow.solve_config import SENSOR_OFFSET_SIGMA_M
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -79,8 +77,8 @@ def run(seed: int, error_m: float, keep_scale: bool) -> dict[str, dict[str, floa
     return out
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=6)
     parser.add_argument("--errors-mm", default="0,0.25,0.5,1")
     parser.add_argument("--jobs", type=int, default=2)
@@ -88,12 +86,12 @@ def main() -> int:
                         help="leave the errors' scale part in (the board's size wrong too)")
     parser.add_argument("--output", default=str(ROOT / "docs/results/board_geometry.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
     errors = [float(x) * 1e-3 for x in args.errors_mm.split(",")]
     t0 = time.perf_counter()
     lines = ["# Solving the board's sensor positions (simulated, wrong board files)", "",
-             f"Command: `{shlex.join(['python', 'benchmarks/board_geometry.py', *sys.argv[1:]])}`"
+             f"Command: `{command(__file__, argv)}`"
              f"  ", f"{time.strftime('%Y-%m-%d')}; configs/simulation/default.toml (8 s), seeds "
              f"1-{args.seeds}; every sensor moved by a Gaussian of the given spread per axis"
              + ("" if args.keep_scale else ", less the part that scales the board (its size "
@@ -119,4 +117,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

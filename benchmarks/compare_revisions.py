@@ -1,7 +1,7 @@
 """Two revisions of lhgraph side by side, through the CLI only (the file contract is the one
 interface both must share): same answers, and the whole `lhgraph solve` process timed.
 
-    python benchmarks/compare_revisions.py --base REV [--head REV] [--runs 5] [--seeds 2]
+    python -m benchmarks compare_revisions --base REV [--head REV] [--runs 5] [--seeds 2]
         [--output docs/results/compare_revisions.md] [--force]
 
 ``--base`` and ``--head`` are git revisions checked out into temporary worktrees; without
@@ -31,7 +31,6 @@ import json
 import os
 import platform
 import resource
-import shlex
 import subprocess
 import sys
 import tempfile
@@ -41,6 +40,8 @@ from datetime import date
 from pathlib import Path
 
 import numpy as np
+
+from benchmarks import command, prog
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -188,15 +189,15 @@ def timing(base: Path, head: Path, work: Path, runs: int) -> list[str]:
             f"{(med['head'] - med['bare']) / (med['base'] - med['bare']):.3f}.", ""]
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n\n")[0])
     parser.add_argument("--base", required=True, help="git revision of the reference code")
     parser.add_argument("--head", help="git revision to compare (default: the working tree)")
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--seeds", type=int, default=2)
     parser.add_argument("--output", default=str(ROOT / "docs/results/compare_revisions.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = Path(args.output)
     if out.exists() and not args.force:
         print(f"{out}: exists (use --force)", file=sys.stderr)
@@ -212,8 +213,7 @@ def main() -> int:
                for name, r in (("base", args.base), ("head", args.head or "HEAD"))}
         head_label = rev["head"] + ("" if args.head else " + working tree")
         lines = ["# Two revisions side by side", "",
-                 f"Command: `python benchmarks/compare_revisions.py "
-                 f"{shlex.join(sys.argv[1:])}`  ",
+                 f"Command: `{command(__file__, argv)}`  ",
                  f"Base {rev['base']}, head {head_label}; machine: {platform.machine()}, "
                  f"{os.cpu_count()} cores, Python {platform.python_version()}; {date.today()}",
                  ""]

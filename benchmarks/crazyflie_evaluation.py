@@ -23,25 +23,40 @@ beforehand and passed in, e.g.
     lhgraph track --stations DIR/stations-cfclient.toml --angles DIR/angles.csv \
         --board crazyflie_deck --calibration DIR/ootx.toml --output DIR/track-cfclient.csv
 
-    python3 benchmarks/crazyflie_evaluation.py [--import-dir DIR] \
-        [--stations NAME=FILE ...] [--track NAME=T.csv ...]
+    python -m benchmarks crazyflie_evaluation [--log lh1|lh2] [--mocap NPY | --import-dir DIR] \
+        [--stations NAME=FILE ...] [--track NAME=T.csv ...] [--write-docs | --output FILE]
 
-Default: imports the shared log into a temporary directory and evaluates
-``stations-cfclient.toml``. Writes docs/results/crazyflie_evaluation.md.
+Default: imports the shared log (with the ``mocapNN.npy`` beside it, or ``--mocap``) into a
+temporary directory, evaluates ``stations-cfclient.toml`` and prints the table;
+``--write-docs`` also writes it to docs/results/crazyflie_evaluation[_lh2].md, ``--output``
+to another file.
+
+A mocap of another recording is refused (one line naming the file, exit code 2), by two
+checks: the importer's clock rate (log seconds per mocap second, from the mocap's first and
+last rows against the log's marker events) must be within 1 +- ``MAX_RATE_ERROR`` (every
+shared log with its own mocap: 0.989; with the mocap of a recording of another length: 0.49
+or 1.98), and, the check that also catches another recording of the same length and the one
+an ``--import-dir`` allows, at least one geometry's positions must follow the mocap: rms
+error after the best rigid fit and time search at most ``MAX_ALIGNED_RMS_M`` (the shared logs
+with their own mocap: 19-36 mm; with another recording's: over 1 m).
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks import prog
+from lhgraph.errors import InputError, LhgraphError
 from lhgraph.geometry.kabsch import weighted_kabsch
 from lhgraph.geometry.transforms import transform_points
 from lhgraph.importers.crazyflie import import_crazyflie
+from lhgraph.importers.crazyflie.convert import default_mocap_path
 from lhgraph.io.angles import Angles, load_angles
 from lhgraph.io.files import read_csv_columns
 from lhgraph.io.stations import Stations, load_stations
@@ -53,6 +68,8 @@ DATA = ROOT.parent / "shared" / "data" / "bitcraze-positioning"
 LOGS = {"lh1": DATA / "lh1_crossingBeam_move" / "log02",
         "lh2": DATA / "lh2_crossingBeam_move" / "log00"}
 SEARCH_S = 0.1
+MAX_RATE_ERROR = 0.05
+MAX_ALIGNED_RMS_M = 0.25
 PERCENTILES = (25, 50, 75, 90, 95)
 
 
@@ -179,32 +196,70 @@ def aligned_errors(t: np.ndarray, p: np.ndarray, t_m: np.ndarray, p_m: np.ndarra
     return e[np.isfinite(e)], best[1], best[2]
 
 
+def check_clock_rate(rate: float, source: str | Path) -> None:
+    """Refuse (InputError naming ``source``) a mocap whose clock rate on the log (log seconds
+    per mocap second) is outside 1 +- ``MAX_RATE_ERROR``: not this recording's."""
+    if not abs(rate - 1.0) <= MAX_RATE_ERROR:
+        raise InputError(f"clock rate {rate:.4f} log s per mocap s, outside 1 +- "
+                         f"{MAX_RATE_ERROR:g}: the mocap of another recording?", source)
+
+
+def check_alignment(rms_m: list[float], source: str | Path) -> None:
+    """Refuse (InputError naming ``source``) a mocap that no geometry's positions follow: the
+    rms errors (m) after the best rigid fit and time search all above ``MAX_ALIGNED_RMS_M``."""
+    if rms_m and not min(rms_m) <= MAX_ALIGNED_RMS_M:
+        raise InputError(f"the positions do not follow the mocap: {min(rms_m) * 1e3:.0f} mm rms "
+                         f"after the best fit (at most {MAX_ALIGNED_RMS_M * 1e3:.0f} mm "
+                         "expected): the mocap of another recording, or every geometry wrong?",
+                         source)
+
+
 def row(name: str, e: np.ndarray, d0: float, d1: float, n: int) -> str:
     pct = np.percentile(e * 1e3, PERCENTILES)
     return (f"| {name} | {n} | " + " | ".join(f"{x:.1f}" for x in pct)
             + f" | {np.sqrt(np.mean(e**2)) * 1e3:.1f} | {d0 * 1e3:+.0f} / {d1 * 1e3:+.0f} |")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--import-dir", type=Path, help="output of lhgraph import crazyflie")
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
+    source = ap.add_mutually_exclusive_group()
+    source.add_argument("--import-dir", type=Path, help="output of lhgraph import crazyflie")
+    source.add_argument("--mocap", type=Path,
+                        help="Qualisys mocapNN.npy for the shared log (default: beside it)")
     ap.add_argument("--log", choices=sorted(LOGS), default="lh1",
                     help="the shared log imported without --import-dir (default lh1)")
     ap.add_argument("--stations", nargs="*", default=[], help="NAME=stations.toml")
     ap.add_argument("--track", nargs="*", default=[], help="NAME=trajectory.csv (measure a)")
     ap.add_argument("--max-gap", type=float, default=0.05, help="interpolation gap (s)")
-    ap.add_argument("--output", type=Path,
-                    help="default docs/results/crazyflie_evaluation.md (lh2: _lh2.md)")
-    args = ap.parse_args()
+    destination = ap.add_mutually_exclusive_group()
+    destination.add_argument("--write-docs", action="store_true",
+                             help="also write docs/results/crazyflie_evaluation.md "
+                             "(lh2: _lh2.md)")
+    destination.add_argument("--output", type=Path, help="also write the table to this file")
+    args = ap.parse_args(argv)
     suffix = "" if args.log == "lh1" else f"_{args.log}"
-    args.output = args.output or ROOT / f"docs/results/crazyflie_evaluation{suffix}.md"
+    if args.write_docs:
+        args.output = ROOT / f"docs/results/crazyflie_evaluation{suffix}.md"
+    try:
+        return evaluate(args)
+    except LhgraphError as exc:
+        print(f"{prog(__file__)}: {exc}", file=sys.stderr)
+        return exc.exit_code
+
+
+def evaluate(args: argparse.Namespace) -> int:
+    """The evaluation of ``main``'s arguments: print the table (and write it to
+    ``args.output`` when set); InputError for a mocap of another recording."""
     start = time.perf_counter()
     tmp = None
     if args.import_dir is None:
         tmp = tempfile.TemporaryDirectory()
         args.import_dir = Path(tmp.name)
         log = LOGS[args.log]
-        import_crazyflie(log, args.import_dir, log.with_name("system-config.yaml"))
+        imported = import_crazyflie(log, args.import_dir, log.with_name("system-config.yaml"),
+                                    mocap=args.mocap)
+        if imported.mocap is not None:
+            check_clock_rate(imported.mocap.rate, args.mocap or default_mocap_path(log))
     angles = load_angles(args.import_dir / "angles.csv")
     mocap = read_csv_columns(args.import_dir / "mocap.csv",
                              [("time", float), ("x", float), ("y", float), ("z", float)])
@@ -213,16 +268,19 @@ def main() -> None:
     geometries = dict(s.split("=", 1) for s in args.stations) or {
         "cfclient": str(args.import_dir / "stations-cfclient.toml")}
     lines = [f"# Crazyflie {args.log.upper()} log: station geometries against Qualisys", "",
-             "`python3 benchmarks/crazyflie_evaluation.py` (docs/crazyflie.md). Position error "
+             "`python -m benchmarks crazyflie_evaluation` (docs/crazyflie.md). Position error "
              "(mm) after the best rigid fit to the mocap, offsets searched +-100 ms at both "
              "ends (start / end offset in the last column, ms).", "",
              "## (b) the log's correctedAngle as crossing-beam positions", "",
              "| geometry | moments | " + " | ".join(f"p{p}" for p in PERCENTILES)
              + " | rms | offsets |", "|---" * (len(PERCENTILES) + 4) + "|"]
+    rms_m = []
     for name, path in geometries.items():
         t, p = crossing_beam_positions(angles, load_stations(path), args.max_gap)
         e, d0, d1 = aligned_errors(t, p, t_m, p_m)
         lines.append(row(name, e, d0, d1, len(e)))
+        rms_m.append(float(np.sqrt(np.mean(e**2))))
+    check_alignment(rms_m, args.import_dir / "mocap.csv")
     lines += ["", "## (a) tracked positions (`lhgraph track`)", ""]
     if args.track:
         lines += ["| track | poses | " + " | ".join(f"p{p}" for p in PERCENTILES)
@@ -244,12 +302,14 @@ def main() -> None:
     else:
         lines.append("Not measured: no `--track` trajectory given.")
     lines += ["", f"Run time: {time.perf_counter() - start:.1f} s.", ""]
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text("\n".join(lines))
+    if args.output is not None:
+        args.output.parent.mkdir(parents=True, exist_ok=True)
+        args.output.write_text("\n".join(lines))
     print("\n".join(lines))
     if tmp is not None:
         tmp.cleanup()
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -9,19 +9,21 @@
 4. the deck geometry: distances between the diodes' crossing-beam positions (cfclient's
    geometry) against ``crazyflie_deck``.
 
-    python3 benchmarks/crazyflie_log_evidence.py
+    python -m benchmarks crazyflie_log_evidence
 
 Writes docs/results/crazyflie_log_evidence.md.
 """
 
 from __future__ import annotations
 
+import argparse
 import time
 from pathlib import Path
 
 import numpy as np
-from crazyflie_evaluation import crossing_points, ray_directions
 
+from benchmarks import prog
+from benchmarks.crazyflie_evaluation import crossing_points, ray_directions
 from lhgraph.importers.crazyflie import read_usd_log
 from lhgraph.importers.crazyflie.sweeps import repeated_hits
 from lhgraph.io.cfclient import read_system_config
@@ -37,7 +39,9 @@ def groups(t: np.ndarray) -> np.ndarray:
     return np.r_[0, np.cumsum(np.diff(t) > 1e-3)]
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
+    parser.parse_args(argv)
     start = time.perf_counter()
     log = read_usd_log(DATA / "log02")
     config = read_system_config(DATA / "system-config.yaml")
@@ -53,7 +57,7 @@ def main() -> None:
     only0 = has[:, 0] & ~has[:, 1]
     both = has[:, 0] & has[:, 1]
     out = ["# Crazyflie LH1 log: what the events hold", "",
-           "`python3 benchmarks/crazyflie_log_evidence.py` on the shared `log02` "
+           "`python -m benchmarks crazyflie_log_evidence` on the shared `log02` "
            "(docs/crazyflie.md).", "", "## 1. Station 0's extra sweeps", "",
            f"lhAngle events: {len(a)} in {n} groups; groups with station 0 only: "
            f"{only0.sum()}, with both stations: {both.sum()}, station 1 only: "
@@ -139,7 +143,8 @@ def main() -> None:
     path = ROOT / "docs/results/crazyflie_log_evidence.md"
     path.write_text("\n".join(out))
     print("\n".join(out))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

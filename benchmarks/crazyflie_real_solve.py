@@ -1,7 +1,7 @@
 """Our calibration of a shared Crazyflie log against cfclient's, on issue #14's measures (b)
 and (a) (LH1 log) and issue #15's (LH2 log, ``--log lh2``).
 
-    python3 benchmarks/crazyflie_real_solve.py [--log lh1|lh2] [--import-dir DIR]
+    python -m benchmarks crazyflie_real_solve [--log lh1|lh2] [--import-dir DIR]
         [--work DIR] [--output docs/results/crazyflie_real_solve[_lh2].md]
 
 1. ``lhgraph import crazyflie`` of the shared log (or ``--import-dir``, its output).
@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import prog
 from lhgraph.io.angles import Angles, load_angles, save_angles
 from lhgraph.io.stations import load_stations
 
@@ -87,15 +88,15 @@ def run_tracks(tracks: dict[str, tuple[Path, list[str]]], imp: Path, work: Path
     return seconds
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
     ap.add_argument("--import-dir", type=Path, help="output of lhgraph import crazyflie")
     ap.add_argument("--work", type=Path, help="where the solutions go (default: a temp dir)")
     ap.add_argument("--log", choices=sorted(LOGS), default="lh1",
                     help="which shared log (default lh1)")
     ap.add_argument("--output", type=Path,
                     help="default docs/results/crazyflie_real_solve.md (lh2: _lh2.md)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     log = LOGS[args.log]
     suffix = "" if args.log == "lh1" else f"_{args.log}"
     args.output = args.output or ROOT / f"docs/results/crazyflie_real_solve{suffix}.md"
@@ -137,12 +138,12 @@ def main() -> int:
               "ours (hit times, IMU) + IMU": (work / "stations-hit-times-IMU.toml", imu)}
     track_s = run_tracks(tracks, imp, work)
     evaluation = work / "evaluation.md"
-    subprocess.run([sys.executable, str(ROOT / "benchmarks/crazyflie_evaluation.py"),
+    subprocess.run([sys.executable, "-m", "benchmarks", "crazyflie_evaluation",
                     "--log", args.log, "--import-dir", str(imp), "--output", str(evaluation),
                     "--stations",
                     *geometries, "--track",
                     *(f"{name}={work / f'track-{i}.csv'}" for i, name in enumerate(tracks))],
-                   check=True, capture_output=True)
+                   check=True, capture_output=True, cwd=ROOT)
     cf = load_stations(imp / "stations-cfclient.toml")
     d_cf = np.linalg.norm((np.linalg.inv(cf.pose(0)) @ cf.pose(1))[:3, 3])
     table = [line for line in evaluation.read_text().splitlines() if line.startswith("|")]
@@ -166,7 +167,7 @@ def main() -> int:
     track_rows = [f"- `lhgraph track` through {name}'s geometry: {s:.0f} s (two tracks in "
                   "parallel on the machine's cores)" for name, s in track_s.items()]
     lines = [f"# The shared Crazyflie {args.log.upper()} log calibrated by lhgraph", "",
-             f"`python3 benchmarks/crazyflie_real_solve.py --log {args.log}` "
+             f"`python -m benchmarks crazyflie_real_solve --log {args.log}` "
              "(docs/crazyflie.md).", "",
              "## Solves", "",
              "| times | LM iterations | residuals | station distance (m) | solve s |",

@@ -3,7 +3,7 @@ Cramér–Rao-type bound at the true poses, per family of simulated captures (is
 measurement; the bound itself is checked against a Monte-Carlo spread in
 tests/test_bound.py).
 
-    python benchmarks/crlb.py [--seeds 6] [--protocol 10] [--jobs 2]
+    python -m benchmarks crlb [--seeds 6] [--protocol 10] [--jobs 2]
         [--motion-prior-estimate chi2|redundancy]
         [--output docs/results/crlb.md] [--force]
 
@@ -44,29 +44,27 @@ Families: the first ``--protocol`` captures of the paper protocol
 
 from __future__ import annotations
 
-import os
+import benchmarks._single_thread  # noqa: F401  (first: before numpy loads)
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# isort: split
 
-import argparse  # noqa: E402
-import dataclasses  # noqa: E402
-import shlex  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import dataclasses
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
-from joblib import Parallel, delayed  # noqa: E402
+import numpy as np
+from joblib import Parallel, delayed
 
-from lhgraph.estimation.bound import information_bound, true_values  # noqa: E402
-from lhgraph.estimation.graph.options import PRIOR_ESTIMATES, GraphOptions  # noqa: E402
-from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
-from lhgraph.estimation.problem import build_problem  # noqa: E402
-from lhgraph.geometry.transforms import inverse, se3_log  # noqa: E402
-from lhgraph.io.files import check_writable  # noqa: E402
-from lhgraph.sim.config import paper_protocol  # noqa: E402
-from lhgraph.sim.simulate import SimulatedCapture, load_simulation_config, simulate  # noqa: E402
+from benchmarks import command, prog
+from lhgraph.estimation.bound import information_bound, true_values
+from lhgraph.estimation.graph.options import PRIOR_ESTIMATES, GraphOptions
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.problem import build_problem
+from lhgraph.geometry.transforms import inverse, se3_log
+from lhgraph.io.files import check_writable
+from lhgraph.sim.config import paper_protocol
+from lhgraph.sim.simulate import SimulatedCapture, load_simulation_config, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 ROTOR_RAD_S = 2 * np.pi * 60.0
@@ -131,8 +129,8 @@ def families(protocol: int, seeds: int) -> list[tuple[str, object, int | None]]:
     return jobs
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=6)
     parser.add_argument("--protocol", type=int, default=10)
     parser.add_argument("--jobs", type=int, default=2)
@@ -141,13 +139,13 @@ def main() -> int:
     parser.add_argument("--motion-prior-estimate", choices=PRIOR_ESTIMATES,
                         default=GraphOptions().motion_prior_estimate,
                         help="GraphOptions.motion_prior_estimate of the solves")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
     t0 = time.perf_counter()
     rows = Parallel(n_jobs=args.jobs)(delayed(run)(f, c, s, args.motion_prior_estimate)
                                       for f, c, s in families(args.protocol, args.seeds))
     lines = ["# Station 1 against the Cramér–Rao bound at the truth", "",
-             f"Command: `{shlex.join(['python', 'benchmarks/crlb.py', *sys.argv[1:]])}`  ",
+             f"Command: `{command(__file__, argv)}`  ",
              f"{time.strftime('%Y-%m-%d')}. Bound and efficiency as defined in the script's "
              "docstring (the graph's measurement model at the true poses, the simulator's "
              "quantisation and Gaussian noise, the motion prior at the true motion's "
@@ -178,4 +176,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -1,6 +1,6 @@
 """Few-diode calibration on simulated Crazyflie deck logs (configs/simulation/deck.toml).
 
-    python benchmarks/deck_benchmark.py [--seeds 10] [--jobs 2]
+    python -m benchmarks deck_benchmark [--seeds 10] [--jobs 2]
         [--output docs/results/deck.md] [--force]
 
 1. Accuracy: 120 s deck captures (two LH1 stations 4 m apart, hand-held motion, the real
@@ -15,29 +15,29 @@
 
 from __future__ import annotations
 
+import benchmarks._single_thread  # noqa: F401  (first: before numpy loads)
+
+# isort: split
+
+import argparse
 import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+import numpy as np
+from joblib import Parallel, delayed
 
-import argparse  # noqa: E402
-import platform  # noqa: E402
-import shlex  # noqa: E402
-import subprocess  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from collections.abc import Callable  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
-from joblib import Parallel, delayed  # noqa: E402
-
-from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
-from lhgraph.geometry.transforms import inverse, rotation_angle, se3_log  # noqa: E402
-from lhgraph.io.files import check_writable  # noqa: E402
-from lhgraph.model.calibration import StationCalibration, save_calibration  # noqa: E402
-from lhgraph.sim.simulate import load_simulation_config, simulate, write_simulation  # noqa: E402
+from benchmarks import command, prog
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.geometry.transforms import inverse, rotation_angle, se3_log
+from lhgraph.io.files import check_writable
+from lhgraph.model.calibration import StationCalibration, save_calibration
+from lhgraph.sim.simulate import load_simulation_config, simulate, write_simulation
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "configs/simulation/deck.toml"
@@ -93,17 +93,17 @@ def whole_process(seed: int, runs: int = 3) -> list[float]:
     return times
 
 
-def seeds_in_parallel(description: str, output: Path, run: Callable[[int], dict]
-                      ) -> tuple[argparse.Namespace, Path, list[dict]]:
-    """The deck benchmarks' command line (``--seeds``, ``--jobs``, ``--output`` default
-    ``output``, ``--force``), the checked output path and ``run(seed)`` of every seed, run
-    ``--jobs`` at a time."""
-    parser = argparse.ArgumentParser(description=description)
+def seeds_in_parallel(path: str, description: str, output: Path, run: Callable[[int], dict],
+                      argv: list[str] | None) -> tuple[argparse.Namespace, Path, list[dict]]:
+    """The command line ``argv`` of the deck benchmark in file ``path`` (``--seeds``,
+    ``--jobs``, ``--output`` default ``output``, ``--force``), the checked output path and
+    ``run(seed)`` of every seed, run ``--jobs`` at a time."""
+    parser = argparse.ArgumentParser(prog=prog(path), description=description)
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--output", default=str(output))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
     rows = Parallel(n_jobs=args.jobs)(delayed(run)(s) for s in range(1, args.seeds + 1))
     return args, out, rows
@@ -117,16 +117,16 @@ def write_report(out: Path, lines: list[str]) -> int:
     return 0
 
 
-def main() -> int:
-    args, out, rows = seeds_in_parallel(__doc__.split("\n")[0], ROOT / "docs/results/deck.md",
-                                        run_one)
+def main(argv: list[str] | None = None) -> int:
+    args, out, rows = seeds_in_parallel(__file__, __doc__.split("\n")[0],
+                                        ROOT / "docs/results/deck.md", run_one, argv)
     cli = whole_process(1)
     pos = np.array([r["pos_mm"] for r in rows])
     rot = np.array([r["rot_deg"] for r in rows])
     nees = np.array([r["nees"] for r in rows])
     off = np.array([r["states_off"] for r in rows])
     lines = ["# Few-diode calibration: simulated Crazyflie deck logs", "",
-             f"Command: `python benchmarks/deck_benchmark.py {shlex.join(sys.argv[1:])}`  ",
+             f"Command: `{command(__file__, argv)}`  ",
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
              f"Python {platform.python_version()}; {time.strftime('%Y-%m-%d')}  ",
              f"Config: `configs/simulation/deck.toml` (120 s), seeds 1-{args.seeds}", "",
@@ -156,4 +156,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

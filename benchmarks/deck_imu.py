@@ -1,6 +1,6 @@
 """Simulated Crazyflie deck logs with and without the deck's IMU (issue #16's deck figure).
 
-    python benchmarks/deck_imu.py [--seeds 10] [--jobs 2] [--output docs/results/deck_imu.md]
+    python -m benchmarks deck_imu [--seeds 10] [--jobs 2] [--output docs/results/deck_imu.md]
         [--force]
 
 Per seed of ``configs/simulation/deck.toml`` (120 s, two LH1 stations, hand-held motion, the
@@ -21,29 +21,26 @@ accelerometer 2.5x its 0.02 m/s^2), the same setting as the facing family's ther
 
 from __future__ import annotations
 
+import benchmarks._single_thread  # noqa: F401  (first: before numpy loads)
+
+# isort: split
+
 import os
+import platform
+import time
+from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+import numpy as np
 
-import platform  # noqa: E402
-import shlex  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-from lhgraph.estimation.graph.options import GraphOptions  # noqa: E402
-from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
-from lhgraph.estimation.graph.track import track  # noqa: E402
-from lhgraph.geometry.transforms import rotation_angle  # noqa: E402
-from lhgraph.sim.imu import simulate_imu  # noqa: E402
-from lhgraph.sim.simulate import load_simulation_config, simulate  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from deck_benchmark import seeds_in_parallel, write_report  # noqa: E402
-from imu_targets import SIMULATED_NOISE, station_figures  # noqa: E402
+from benchmarks import command
+from benchmarks.deck_benchmark import seeds_in_parallel, write_report
+from benchmarks.imu_targets import SIMULATED_NOISE, station_figures
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.graph.track import track
+from lhgraph.geometry.transforms import rotation_angle
+from lhgraph.sim.imu import simulate_imu
+from lhgraph.sim.simulate import load_simulation_config, simulate
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "configs/simulation/deck.toml"
@@ -76,15 +73,15 @@ def run_one(seed: int) -> dict:
     return row
 
 
-def main() -> int:
-    args, out, rows = seeds_in_parallel(__doc__.split("\n")[0],
-                                        ROOT / "docs/results/deck_imu.md", run_one)
+def main(argv: list[str] | None = None) -> int:
+    args, out, rows = seeds_in_parallel(__file__, __doc__.split("\n")[0],
+                                        ROOT / "docs/results/deck_imu.md", run_one, argv)
 
     def med(key: str) -> float:
         return float(np.median([r[key] for r in rows]))
 
     lines = ["# Simulated deck logs with and without the IMU", "",
-             f"Command: `python benchmarks/deck_imu.py {shlex.join(sys.argv[1:])}`  ",
+             f"Command: `{command(__file__, argv)}`  ",
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
              f"Python {platform.python_version()}; {time.strftime('%Y-%m-%d')}  ",
              f"Config: `configs/simulation/deck.toml` (120 s), seeds 1-{args.seeds}; IMU: "
@@ -121,4 +118,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -1,7 +1,7 @@
 """Decode speed: an 8 s simulated edge capture, the same signal as a 64 MB raw dump, and the
 real libsurvive recording. Writes docs/results/decode_speed.md.
 
-    python benchmarks/decode_speed.py [--runs 5] [--output docs/results/decode_speed.md]
+    python -m benchmarks decode_speed [--runs 5] [--output docs/results/decode_speed.md]
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import prog
 from lhgraph.signal.capture import read_capture, read_raw_dump, write_capture
 from lhgraph.signal.decode import DecodeOptions, decode_capture, decode_pulses
 from lhgraph.signal.libsurvive import read_libsurvive
@@ -35,11 +36,11 @@ def _median_time(fn, runs: int) -> tuple[float, object]:
     return statistics.median(times), out
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--output", default=str(ROOT / "docs" / "results" / "decode_speed.md"))
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
 
     sim = simulate(default_simulation_config(), seed=1)
     cap = synthesize_capture(sim, None, np.random.default_rng(1),
@@ -72,7 +73,7 @@ def main() -> None:
     lines = [
         "# Decode speed",
         "",
-        f"Command: `python benchmarks/decode_speed.py --runs {args.runs}` "
+        f"Command: `python -m benchmarks decode_speed --runs {args.runs}` "
         f"(median of {args.runs} runs; {platform.processor() or platform.machine()}, "
         f"{os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}).",
         "",
@@ -90,7 +91,8 @@ def main() -> None:
     Path(args.output).parent.mkdir(parents=True, exist_ok=True)
     Path(args.output).write_text("\n".join(lines))
     print("\n".join(lines))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

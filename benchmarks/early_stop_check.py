@@ -6,20 +6,19 @@ solves 2 s captures of six layouts (two seeds each) with the defaults and again 
 1e-12 relative error change, and reports the largest per-coordinate difference of station 1
 in units of its standard deviation, with the iterations each run took.
 
-    python benchmarks/early_stop_check.py [--output docs/results/early_stop.md] [--force]
+    python -m benchmarks early_stop_check [--output docs/results/early_stop.md] [--force]
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import shlex
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks import command, prog
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.geometry.transforms import inverse, se3_log
@@ -30,15 +29,15 @@ ROOT = Path(__file__).resolve().parent.parent
 LAYOUTS = ("default", "facing", "ninety", "fast", "far", "realistic")
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--output", default=str(ROOT / "docs/results/early_stop.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
     full_options = GraphOptions(step_tolerance_sigma=0.0, relative_tolerance=1e-12)
     lines = ["# Early stop vs full convergence", "",
-             f"Command: `python benchmarks/early_stop_check.py {shlex.join(sys.argv[1:])}`  ",
+             f"Command: `{command(__file__, argv)}`  ",
              f"{time.strftime('%Y-%m-%d')}; 2 s captures, station 1.", "",
              "| layout | seed | iterations (default) | iterations (full) | largest difference "
              "(sigma) |", "|---|---|---|---|---|"]
@@ -62,4 +61,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

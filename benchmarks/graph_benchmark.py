@@ -1,6 +1,6 @@
 """Accuracy, robustness, covariance honesty and speed of the factor-graph solver.
 
-    python benchmarks/graph_benchmark.py [--limit N] [--jobs 2] [--quick]
+    python -m benchmarks graph_benchmark [--limit N] [--jobs 2] [--quick]
         [--output docs/results/graph.md] [--force]
 
 1. The paper's simulation protocol (configs/paper_simulation.toml, 10 setups x 5
@@ -17,37 +17,37 @@
 
 from __future__ import annotations
 
+import benchmarks._single_thread  # noqa: F401  (first: before numpy loads)
+
+# isort: split
+
+import argparse
+import dataclasses
 import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+import numpy as np
+from joblib import Parallel, delayed
+from joblib.externals.loky import get_reusable_executor
 
-import argparse  # noqa: E402
-import dataclasses  # noqa: E402
-import platform  # noqa: E402
-import shlex  # noqa: E402
-import subprocess  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
-from joblib import Parallel, delayed  # noqa: E402
-from joblib.externals.loky import get_reusable_executor  # noqa: E402
-
-from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
-from lhgraph.estimation.graph.streaming import StreamingSolver, cycles  # noqa: E402
-from lhgraph.geometry.transforms import inverse, rotation_angle, se3_log  # noqa: E402
-from lhgraph.io.files import check_writable  # noqa: E402
-from lhgraph.sim.simulate import (  # noqa: E402
+from benchmarks import command, prog
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.graph.streaming import StreamingSolver, cycles
+from lhgraph.geometry.transforms import inverse, rotation_angle, se3_log
+from lhgraph.io.files import check_writable
+from lhgraph.sim.simulate import (
     SimulationConfig,
     load_simulation_config,
     paper_protocol,
     simulate,
     write_simulation,
 )
-from lhgraph.workflow.study import (  # noqa: E402
+from lhgraph.workflow.study import (
     PAPER_MAE,
     protocol_statistics,
     signed_errors,
@@ -87,19 +87,19 @@ def protocol_table(rows: list[dict]) -> list[str]:
     return lines
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--limit", type=int, help="only the first N protocol captures")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--quick", action="store_true", help="fewer seeds and runs")
     parser.add_argument("--output", default=str(ROOT / "docs/results/graph.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
     seeds = range(3 if args.quick else 10)
     speed_seeds = range(3 if args.quick else 20)
     lines = ["# Factor-graph solver: measured accuracy and speed", "",
-             f"Command: `python benchmarks/graph_benchmark.py {shlex.join(sys.argv[1:])}`  ",
+             f"Command: `{command(__file__, argv)}`  ",
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
              f"Python {platform.python_version()}; {time.strftime('%Y-%m-%d')}", ""]
 
@@ -213,4 +213,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

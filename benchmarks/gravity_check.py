@@ -10,20 +10,19 @@ then tries all 24 proper axis mappings from the stations' native frame to ours:
 2. for each mapping, how far libsurvive's own relative station pose, mapped into our frames,
    is from ours (rotation angle and direction of the baseline): this fixes all three axes.
 
-    python benchmarks/gravity_check.py [--recording PATH] [--output FILE] [--force]
+    python -m benchmarks gravity_check [--recording PATH] [--output FILE] [--force]
 """
 
 from __future__ import annotations
 
 import argparse
 import itertools
-import shlex
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks import command, prog
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.gravity import to_gravity_world, up_vectors
 from lhgraph.geometry.transforms import inverse, rotation_angle
@@ -60,12 +59,12 @@ def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--recording", type=Path, default=DEFAULT)
     parser.add_argument("--output", default=str(ROOT / "docs/results/gravity_check.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
     decoded, _ = decode_file(args.recording, "libsurvive", device="HMD")
     board = read_libsurvive_board(args.recording, "HMD")
@@ -85,7 +84,7 @@ def main() -> int:
     rows.sort()
     aligned = to_gravity_world(result, up_vectors(decoded.calibrations))
     lines = ["# Real data: the OOTX accelerometer frame", "",
-             f"Command: `{shlex.join(['python', 'benchmarks/gravity_check.py', *sys.argv[1:]])}`  ",
+             f"Command: `{command(__file__, argv)}`  ",
              f"{time.strftime('%Y-%m-%d')}; libsurvive LH1 recording, "
              f"{len(decoded.angles)} HMD hits; accel_dir "
              + ", ".join(f"station {k}: {tuple(int(x) for x in a)}" for k, a in accel.items()),
@@ -109,4 +108,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

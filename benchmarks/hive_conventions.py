@@ -9,7 +9,7 @@ terms); the full joint solve with the graph solver will settle the convention mo
 Also prints the gravity direction in each station frame under the chosen axis mapping
 (docs/hive.md): the IMU-to-tracker rotation is fitted from angular rates.
 
-    python3 benchmarks/hive_conventions.py [--pairs 200] [--bag PATH]
+    python -m benchmarks hive_conventions [--pairs 200] [--bag PATH]
 
 Writes docs/results/hive_conventions.md.
 """
@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import prog
 from lhgraph.geometry.transforms import so3_log
 from lhgraph.importers.hive import read_hive_bag
 from lhgraph.importers.hive.conventions import HIVE_MAPPING, station_calibrations
@@ -50,12 +51,12 @@ def imu_from_tracker(bag, fit) -> np.ndarray:
     return Vt.T @ D @ U.T
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
     ap.add_argument("--bag", default=str(BAG))
     ap.add_argument("--pairs", type=int, default=200, help="sweep pairs per candidate")
     ap.add_argument("--output", default=str(ROOT / "docs/results/hive_conventions.md"))
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
     bag = read_hive_bag(args.bag)
     counts = np.bincount(bag.light["sweep"])
@@ -103,7 +104,7 @@ def main() -> None:
     lines = [
         "# Factory-calibration conventions on the hive recording",
         "",
-        f"`python3 benchmarks/hive_conventions.py --pairs {args.pairs}` — {len(pairs)} sweep "
+        f"`python -m benchmarks hive_conventions --pairs {args.pairs}` — {len(pairs)} sweep "
         "pairs (≥ 12 hits) of data8.11.bag, single-station PnP per pair "
         "(`lhgraph.estimation.init.pnp_nonplanar.single_station_pnp`, axis mapping "
         "az=+h el=+v), OOTX terms from the bag "
@@ -130,7 +131,8 @@ def main() -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text("\n".join(lines))
     print(f"wrote {out}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

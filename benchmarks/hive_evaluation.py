@@ -1,6 +1,6 @@
 """Calibrate the stations of the real hive recording and evaluate (issue 8).
 
-    python3 benchmarks/hive_evaluation.py [--bag PATH] [--slices 3] [--output FILE.md]
+    python -m benchmarks hive_evaluation [--bag PATH] [--slices 3] [--output FILE.md]
 
 Imports ``data8.11.bag`` (read from ../shared, never copied) into a temporary folder, then:
 
@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import prog
 from lhgraph.errors import LhgraphError
 from lhgraph.estimation.baseline import solve_paper
 from lhgraph.estimation.graph.options import GraphOptions
@@ -104,12 +105,12 @@ def row(label: str, r: SolveResult | None, seconds: float, err: str, mocap: Traj
             f"{seconds:.0f} |")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
     ap.add_argument("--bag", type=Path, default=BAG)
     ap.add_argument("--slices", type=int, default=3, help="8 s slices, 4 s apart from motion start")
     ap.add_argument("--output", type=Path, default=REPO / "docs/results/hive_evaluation.md")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
     tmp = Path(tempfile.mkdtemp(prefix="hive_eval_"))
     imported = import_hive(args.bag, tmp)
@@ -125,7 +126,7 @@ def main() -> None:
     data = {name: angles.select((angles.time >= a) & (angles.time < b))
             for name, (a, b) in spans.items()}
     lines = ["# The hive recording: calibration and evaluation", "",
-             f"`python3 benchmarks/hive_evaluation.py --slices {args.slices}` on "
+             f"`python -m benchmarks hive_evaluation --slices {args.slices}` on "
              f"data8.11.bag ({len(angles)} hits, motion from {t0:.1f} s). Graph = "
              "`solve_graph` with default options (the convention table alone fixes the "
              "per-diode sigma at 40 µrad, so that inlier fractions compare); *tracker init* = "
@@ -247,7 +248,8 @@ def main() -> None:
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(text)
     print(text)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

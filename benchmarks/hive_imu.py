@@ -1,7 +1,7 @@
 """The hive recording with its IMU (issue #16's real-data target): the tracker path against
 OptiTrack and station 1 over 8 s slices, light only and with the IMU factors, side by side.
 
-    python3 benchmarks/hive_imu.py [--bag PATH] [--slices 3]
+    python -m benchmarks hive_imu [--bag PATH] [--slices 3]
         [--output docs/results/hive_imu.md]
 
 Imports ``data8.11.bag`` (read from ../shared, never copied) into a temporary folder, then
@@ -34,13 +34,14 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks import prog
+from benchmarks.hive_slice_spread import in_slice
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.metrics import station_errors
@@ -53,9 +54,6 @@ from lhgraph.model.board import load_board
 from lhgraph.model.station import Convention
 from lhgraph.workflow.inputs import station_models
 from lhgraph.workflow.window import motion_start
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from hive_slice_spread import in_slice  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 BAG = REPO.parent / "shared/data/hive-env8/data8.11.bag"
@@ -85,12 +83,12 @@ VARIANTS = {"light only": (False, GraphOptions()),
                 adapt_gyro_sigma=False))}
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
     ap.add_argument("--bag", type=Path, default=BAG)
     ap.add_argument("--slices", type=int, default=3)
     ap.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if not args.bag.is_file():
         print(f"skipped: {args.bag} not found")
         return 0
@@ -104,7 +102,7 @@ def main() -> int:
         models = station_models(Path(tmp) / "ootx.toml", Convention(-1, 1))
     t0 = motion_start(angles)
     lines = ["# The hive recording with its IMU", "",
-             f"Command: `python3 benchmarks/hive_imu.py --slices {args.slices}"
+             f"Command: `python -m benchmarks hive_imu --slices {args.slices}"
              + ("" if args.output == DEFAULT_OUTPUT
                 else f" --output {os.path.relpath(args.output, REPO)}") + "`  ",
              f"Machine: {platform.machine()}, Python {platform.python_version()}; "

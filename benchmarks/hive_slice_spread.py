@@ -2,7 +2,7 @@
 station 1's hits, motion-prior settings and per-diode angle biases, each against the
 whole-bag solve.
 
-    python3 benchmarks/hive_slice_spread.py [--bag PATH] [--output FILE.md] [--force]
+    python -m benchmarks hive_slice_spread [--bag PATH] [--output FILE.md] [--force]
 
 Imports ``data8.11.bag`` (read from ../shared, never copied; sync-bit offsets corrected)
 into a temporary folder, then for each variant solves the whole bag and three 8 s slices
@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import prog
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.rests import rest_spans
@@ -227,12 +228,12 @@ def _kept(keep_every: int) -> str:
     return "as they are" if keep_every == 1 else f"thinned (1 in {keep_every})"
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--bag", type=Path, default=BAG)
     parser.add_argument("--output", default=str(REPO / "docs/results/hive_slice_spread.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if not args.bag.is_file():
         print(f"{args.bag}: not there, nothing measured")
         return 0
@@ -240,7 +241,7 @@ def main() -> int:
     board, angles, models, _ = imported_bag(args.bag)
     t0 = motion_start(angles)
     lines = ["# The hive recording: station 1 over 8 s slices, variants", "",
-             f"`python3 benchmarks/hive_slice_spread.py`, {time.strftime('%Y-%m-%d')}. Station "
+             f"`python -m benchmarks hive_slice_spread`, {time.strftime('%Y-%m-%d')}. Station "
              "1's position from each 8 s slice (from the motion start, 4 s apart) less the "
              "whole-bag solution's, in station 1's frame (x along its line of sight), mm; "
              "sigma = the slices' median reported 1-sigma (position, largest axis).", "",

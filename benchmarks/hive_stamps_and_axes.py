@@ -1,7 +1,7 @@
 """Two open questions of the hive recording, measured (issue 18): are its light stamps worth
 putting on the rotor grid, and are its factory calibrations on the right axes?
 
-    python3 benchmarks/hive_stamps_and_axes.py [--bag PATH] [--output FILE.md] [--force]
+    python -m benchmarks hive_stamps_and_axes [--bag PATH] [--output FILE.md] [--force]
 
 1. The stamps: hive stamps each sweep message with the host's clock when it arrives (after
    the next sync flash, through USB), not with the hit time. Per station and axis, the
@@ -31,8 +31,15 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from hive_slice_spread import BAG, REST_KEEP_EVERY, against_whole, held_out_board, imported_bag
 
+from benchmarks import prog
+from benchmarks.hive_slice_spread import (
+    BAG,
+    REST_KEEP_EVERY,
+    against_whole,
+    held_out_board,
+    imported_bag,
+)
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.rests import rest_spans
@@ -133,12 +140,12 @@ def variant_row(name: str, board: Board, angles: Angles, models: dict, mocap: Tr
             f"{rms(dist[issue]):.2f} / {rms(turn[issue]):.3f} |")
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--bag", type=Path, default=BAG)
     parser.add_argument("--output", default=str(REPO / "docs/results/hive_stamps_and_axes.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if not args.bag.is_file():
         print(f"{args.bag}: not there, nothing measured")
         return 0
@@ -151,7 +158,7 @@ def main() -> int:
     gridded, grid_rows = on_grid(angles, +1.0)
     reversed_hits, _ = on_grid(angles, -1.0)
     lines = ["# The hive recording: its light stamps and its calibration axes", "",
-             f"`python3 benchmarks/hive_stamps_and_axes.py`, {time.strftime('%Y-%m-%d')}.", "",
+             f"`python -m benchmarks hive_stamps_and_axes`, {time.strftime('%Y-%m-%d')}.", "",
              "## 1. Sweep stamps against each station's and axis's rotor grid", "",
              "After mid-bag: when each grid (its own fitted line) next sweeps after the middle "
              "of the bag, ms on the host clock: stamped alike, the station-axis grids follow "

@@ -9,7 +9,7 @@ That is the length the OOTX data bit adds to a sync flash (SPEC section 2: 2 x 1
 60 rev/s: 2 pi 60 Hz x 20.83 us = 7.85 mrad; hive evidently times station 1's sweeps from a
 point of the flash that moves with its length.
 
-    python3 benchmarks/hive_sync_offsets.py [--bag PATH] [--output FILE.md] [--force]
+    python -m benchmarks hive_sync_offsets [--bag PATH] [--output FILE.md] [--force]
 
 Reads ../shared/data/hive-env8/data8.11.bag (never copied into the repository); writes the
 markdown to ``--output`` (default docs/results/hive_sync_offsets.md) and prints it.
@@ -18,14 +18,13 @@ markdown to ``--output`` (default docs/results/hive_sync_offsets.md) and prints 
 from __future__ import annotations
 
 import argparse
-import shlex
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks import command, prog
 from lhgraph.importers.hive import import_hive
 from lhgraph.io.angles import load_angles
 from lhgraph.io.files import check_writable
@@ -37,12 +36,12 @@ DATA_BIT_S = 2 * 10.42e-6  # SPEC section 2: the data bit adds 2 x 10.42 us to a
 ROTOR_HZ = 60.0
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--bag", type=Path, default=BAG)
     parser.add_argument("--output", default=str(REPO / "docs/results/hive_sync_offsets.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
     with tempfile.TemporaryDirectory() as tmp:
         import_hive(args.bag, tmp, sync_bits=False)  # the angles as hive recorded them
@@ -52,7 +51,7 @@ def main() -> int:
     rest = angles.select(angles.time < rest_end)
     sweep = rest.extra["sweep"].astype(np.int64)
     lines = ["# The hive recording: a per-sweep offset in station 1's angles", "",
-             f"Command: `python3 benchmarks/hive_sync_offsets.py {shlex.join(sys.argv[1:])}`  ",
+             f"Command: `{command(__file__, argv)}`  ",
              f"{time.strftime('%Y-%m-%d')}; data8.11.bag while the tracker rests "
              f"(0-{rest_end:.1f} s). Per sweep: the mean over its hits of the angle minus that "
              "sensor's median angle at rest. Split at half the expected gap "
@@ -90,4 +89,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -1,7 +1,7 @@
 """Issue #16's simulated IMU figures beside the deck's (``deck_imu.py``): the solve time with
 an IMU and fast against slow motion.
 
-    python3 benchmarks/imu_targets.py [--seeds 6] [--runs 5] [--jobs 2]
+    python -m benchmarks imu_targets [--seeds 6] [--runs 5] [--jobs 2]
         [--output docs/results/imu_targets.md]
 
 1. **Time**: the default 8 s capture (``configs/simulation/default.toml``, seed 1) with a
@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 from joblib import Parallel, delayed
 
+from benchmarks import prog
 from lhgraph.errors import SolverError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
@@ -132,19 +133,19 @@ def facing(seed: int, options: GraphOptions) -> tuple[bool, float, float, float]
     return light, f["pos_mm"], f["rot_deg"], f["nees"]
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=6)
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--output", type=Path, default=ROOT / "docs/results/imu_targets.md")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     check_writable(args.output, overwrite=True)
     light_s, imu_s = whole_process_seconds(args.runs)
     rows = Parallel(n_jobs=args.jobs)(delayed(errors)(f, s) for f in MOTIONS
                                       for s in range(1, args.seeds + 1))
     lines = ["# Simulated IMU figures: solve time, fast against slow motion", "",
-             f"Command: `python3 benchmarks/imu_targets.py --seeds {args.seeds} --runs "
+             f"Command: `python -m benchmarks imu_targets --seeds {args.seeds} --runs "
              f"{args.runs}`  ",
              f"Machine: {platform.machine()}, Python {platform.python_version()}; "
              f"{time.strftime('%Y-%m-%d')}. Default layout, 8 s, a simulated 1 kHz IMU.", "",

@@ -1,6 +1,6 @@
 """Simulated Lighthouse v2 (SteamVR 2.0) calibration: two stations, and rooms of 4 and 8.
 
-    python benchmarks/lh2_benchmark.py [--seeds 10] [--limit N] [--jobs 2] [--timing-seeds 5]
+    python -m benchmarks lh2_benchmark [--seeds 10] [--limit N] [--jobs 2] [--timing-seeds 5]
         [--output docs/results/lh2_benchmark.md] [--force]
 
 Issue #15's simulated targets, every capture with 30 µrad noise per hit and 10 % of the
@@ -23,29 +23,28 @@ the true station models (generation 2, channels):
 
 from __future__ import annotations
 
+import benchmarks._single_thread  # noqa: F401  (first: before numpy loads)
+
+# isort: split
+
+import argparse
+import dataclasses
 import os
+import platform
+import time
+from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+import numpy as np
+from joblib import Parallel, delayed
 
-import argparse  # noqa: E402
-import dataclasses  # noqa: E402
-import platform  # noqa: E402
-import shlex  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
-from joblib import Parallel, delayed  # noqa: E402
-
-from lhgraph.estimation.graph.solver import solve_graph  # noqa: E402
-from lhgraph.estimation.init.pnp_kabsch import initialise  # noqa: E402
-from lhgraph.estimation.metrics import station_errors  # noqa: E402
-from lhgraph.estimation.problem import build_problem  # noqa: E402
-from lhgraph.geometry.transforms import inverse, se3_log  # noqa: E402
-from lhgraph.io.files import check_writable  # noqa: E402
-from lhgraph.sim.simulate import (  # noqa: E402
+from benchmarks import command, prog
+from lhgraph.estimation.graph.solver import solve_graph
+from lhgraph.estimation.init.pnp_kabsch import initialise
+from lhgraph.estimation.metrics import station_errors
+from lhgraph.estimation.problem import build_problem
+from lhgraph.geometry.transforms import inverse, se3_log
+from lhgraph.io.files import check_writable
+from lhgraph.sim.simulate import (
     SimulatedCapture,
     SimulationConfig,
     load_simulation_config,
@@ -134,8 +133,8 @@ def weak_link(window_s: float, station: int = 2, seed: int = 1) -> dict:
             "hits_kept": int(keep_own.sum())} | row
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--limit", type=int, help="only the first N protocol captures")
     parser.add_argument("--jobs", type=int, default=2)
@@ -143,11 +142,11 @@ def main() -> int:
                         help="captures of each kind solved again one at a time for section 3")
     parser.add_argument("--output", default=str(ROOT / "docs/results/lh2_benchmark.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
     t_start = time.perf_counter()
     lines = ["# LH2 (SteamVR 2.0): simulated calibration, 2 stations and rooms of 4 and 8", "",
-             f"Command: `python benchmarks/lh2_benchmark.py {shlex.join(sys.argv[1:])}`  ",
+             f"Command: `{command(__file__, argv)}`  ",
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
              f"Python {platform.python_version()}; {time.strftime('%Y-%m-%d')}; "
              f"{args.jobs} solves in parallel (solve times are in-process, per solve)  ",
@@ -303,4 +302,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

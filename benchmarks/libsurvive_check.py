@@ -8,19 +8,18 @@ under the four gib/curve sign conventions (SPEC §3). libsurvive's own solution 
 ``.json``) is in its frames, so the comparison uses what does not depend on frames: the
 distance between the stations and the angle of their relative rotation.
 
-    python benchmarks/libsurvive_check.py [--recording PATH] [--output FILE] [--force]
+    python -m benchmarks libsurvive_check [--recording PATH] [--output FILE] [--force]
 """
 
 from __future__ import annotations
 
 import argparse
-import shlex
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks import command, prog
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.geometry.transforms import inverse, rotation_angle
 from lhgraph.io.files import check_writable
@@ -38,12 +37,12 @@ def relative(T: np.ndarray) -> tuple[float, float]:
     return float(np.linalg.norm(T[:3, 3])), float(np.degrees(rotation_angle(T[:3, :3])))
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--recording", type=Path, default=DEFAULT)
     parser.add_argument("--output", default=str(ROOT / "docs/results/libsurvive_check.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
     decoded, _ = decode_file(args.recording, "libsurvive", device="HMD")
     board = read_libsurvive_board(args.recording, "HMD")
@@ -51,7 +50,7 @@ def main() -> int:
     # our station 0 is the first flasher = libsurvive's lighthouse 1 (docs/decoding.md)
     d_ls, a_ls = relative(inverse(ls[1]) @ ls[0])
     lines = ["# Real data: the libsurvive LH1 recording", "",
-             f"Command: `python benchmarks/libsurvive_check.py {shlex.join(sys.argv[1:])}`  ",
+             f"Command: `{command(__file__, argv)}`  ",
              f"{time.strftime('%Y-%m-%d')}; {len(decoded.angles)} decoded HMD hits (static HMD, "
              "two stations facing each other).", "",
              "| model | station distance (m) | relative rotation (deg) | median abs residual "
@@ -76,4 +75,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -6,7 +6,7 @@ and prints
 the paper's Table III layout (MAE and average per-setup SD of X, Y, Z in mm and alpha, beta,
 gamma in degrees) next to the paper's own figures, plus the median run time per capture.
 
-    python benchmarks/paper_protocol_baseline.py [--limit N] [--jobs 2] [--warm-start]
+    python -m benchmarks paper_protocol_baseline [--limit N] [--jobs 2] [--warm-start]
         [--reconstruction full|half|merge] [--kabsch-points board|sensors]
         [--output docs/results/baseline_paper_protocol.md] [--force]
 
@@ -16,26 +16,26 @@ averaged over the setups (as the paper does); MAE = mean over all captures of |e
 
 from __future__ import annotations
 
+import benchmarks._single_thread  # noqa: F401  (first: before numpy loads)
+
+# isort: split
+
+import argparse
 import os
+import platform
+import sys
+import time
+from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+import numpy as np
+from joblib import Parallel, delayed
 
-import argparse  # noqa: E402
-import platform  # noqa: E402
-import shlex  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
-from joblib import Parallel, delayed  # noqa: E402
-
-from lhgraph.errors import LhgraphError  # noqa: E402
-from lhgraph.estimation.baseline import PaperOptions, solve_paper  # noqa: E402
-from lhgraph.io.files import check_writable  # noqa: E402
-from lhgraph.sim.simulate import SimulationConfig, paper_protocol, simulate  # noqa: E402
-from lhgraph.workflow.study import (  # noqa: E402
+from benchmarks import command, prog
+from lhgraph.errors import LhgraphError
+from lhgraph.estimation.baseline import PaperOptions, solve_paper
+from lhgraph.io.files import check_writable
+from lhgraph.sim.simulate import SimulationConfig, paper_protocol, simulate
+from lhgraph.workflow.study import (
     COLUMNS,
     PAPER_MAE,
     PAPER_SD,
@@ -72,7 +72,7 @@ def table(rows: list[tuple[str, list[str]]], header: list[str]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
     ap.add_argument("--protocol", default=str(ROOT / "configs" / "paper_simulation.toml"))
     ap.add_argument("--limit", type=int, default=None, help="only the first N captures")
     ap.add_argument("--jobs", type=int, default=2)
@@ -116,12 +116,10 @@ def main(argv: list[str] | None = None) -> int:
     per_setup = table([(name, fmt(np.mean(np.abs(np.concatenate(v)), axis=0)))
                        for name, v in setups.items()], ["setup (MAE)", *COLUMNS])
     norms = np.linalg.norm(signed[:, :3], axis=1)
-    command = "python " + " ".join(shlex.quote(a) for a in
-                                    ["benchmarks/paper_protocol_baseline.py", *sys.argv[1:]])
     text = "\n".join([
         "# Paper baseline on the paper's simulation protocol",
         "",
-        f"Produced by `{command}` on {platform.node()} ({os.cpu_count()} cores, "
+        f"Produced by `{command(__file__, argv)}` on {platform.node()} ({os.cpu_count()} cores, "
         f"{args.jobs} workers), {time.strftime('%Y-%m-%d %H:%M')}.",
         "",
         f"Captures: {len(results)} of {len(paper_protocol(args.protocol))} "
@@ -150,4 +148,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -6,32 +6,30 @@ script solves the 50 protocol captures and the default layout at four speeds (6 
 seeds 200-205: not the graph benchmark's) for several floors and reports the median and
 mean position error of station 1 and the mean NEES.
 
-    python benchmarks/prior_floor_scan.py [--floors 0.05,0.1,0.2,0.3,1.0] [--jobs 2]
+    python -m benchmarks prior_floor_scan [--floors 0.05,0.1,0.2,0.3,1.0] [--jobs 2]
         [--output docs/results/prior_floor_scan.md] [--force]
 """
 
 from __future__ import annotations
 
-import os
+import benchmarks._single_thread  # noqa: F401  (first: before numpy loads)
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# isort: split
 
-import argparse  # noqa: E402
-import dataclasses  # noqa: E402
-import shlex  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import dataclasses
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
-from joblib import Parallel, delayed  # noqa: E402
+import numpy as np
+from joblib import Parallel, delayed
 
+from benchmarks import command, prog
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
-from lhgraph.geometry.transforms import inverse, se3_log  # noqa: E402
-from lhgraph.io.files import check_writable  # noqa: E402
-from lhgraph.sim.simulate import (  # noqa: E402
+from lhgraph.geometry.transforms import inverse, se3_log
+from lhgraph.io.files import check_writable
+from lhgraph.sim.simulate import (
     SimulationConfig,
     load_simulation_config,
     paper_protocol,
@@ -58,13 +56,13 @@ def errors(config: SimulationConfig, seed: int | None, floors: list[float]
     return out
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--floors", default="0.05,0.1,0.2,0.3,1.0")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--output", default=str(ROOT / "docs/results/prior_floor_scan.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
     floors = [float(x) for x in args.floors.split(",")]
     base = load_simulation_config(ROOT / "configs/simulation/default.toml")
@@ -74,7 +72,7 @@ def main() -> int:
         config = dataclasses.replace(base, motion=dataclasses.replace(base.motion, speed_mps=v))
         sets[f"default layout, {v} m/s (6 seeds)"] = [(config, s) for s in range(200, 206)]
     lines = ["# Motion-prior floor scan", "",
-             f"Command: `{shlex.join(['python', 'benchmarks/prior_floor_scan.py', *sys.argv[1:]])}`"
+             f"Command: `{command(__file__, argv)}`"
              f"  ", f"{time.strftime('%Y-%m-%d')}", "",
              "| captures | " + " | ".join(f"floor {f:g}: median / mean mm, NEES" for f in floors)
              + " |", "|---|" + "---|" * len(floors)]
@@ -91,4 +89,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -1,7 +1,7 @@
 """Where the real Crazyflie LH1 log's solve spends its time, and how far it is from converged
 when it stops (issue #14's run-time target: a 120 s deck log in <= 5 s).
 
-    python3 benchmarks/real_log_convergence.py [--caps 20 40 60 120] [--perturb-mm 1 3 10]
+    python -m benchmarks real_log_convergence [--caps 20 40 60 120] [--perturb-mm 1 3 10]
         [--runs 5] [--output docs/results/real_log_convergence.md]
 
 1. ``lhgraph import crazyflie`` of the shared LH1 log into a temporary folder, and the whole
@@ -35,7 +35,6 @@ import argparse
 import cProfile
 import platform
 import pstats
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -43,6 +42,8 @@ from pathlib import Path
 import gtsam
 import numpy as np
 
+from benchmarks import prog
+from benchmarks.crazyflie_real_solve import LOGS, lhgraph
 from lhgraph.estimation.graph.factors import build_graph
 from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import LMParams, levenberg_marquardt
@@ -56,9 +57,6 @@ from lhgraph.io.angles import load_angles
 from lhgraph.io.files import check_writable
 from lhgraph.model.board import load_board
 from lhgraph.workflow.inputs import station_models
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from crazyflie_real_solve import LOGS, lhgraph  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 LOG = LOGS["lh1"]
@@ -149,14 +147,14 @@ def perturbed(board, angles, models, perturb_mm: list[float], cap: int) -> list[
     return rows
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
     ap.add_argument("--caps", type=int, nargs="+", default=[20, 40, 60, 120])
     ap.add_argument("--perturb-mm", type=float, nargs="+", default=[1.0, 3.0, 10.0])
     ap.add_argument("--runs", type=int, default=5, help="whole-process runs of lhgraph solve")
     ap.add_argument("--output", type=Path,
                     default=ROOT / "docs/results/real_log_convergence.md")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if not LOG.is_file():
         print(f"skipped: {LOG} not found")
         return 0
@@ -187,7 +185,7 @@ def main() -> int:
               flush=True)
     T_last = runs[-1][1].stations.relative_to_reference().pose(1)
     lines = ["# The real Crazyflie LH1 log: convergence and where the time goes", "",
-             "Command: `python3 benchmarks/real_log_convergence.py`  ",
+             "Command: `python -m benchmarks real_log_convergence`  ",
              f"Machine: {platform.machine()}, Python {platform.python_version()}; "
              f"{time.strftime('%Y-%m-%d')}  ",
              f"Log: `{LOG.parent.name}/{LOG.name}` ({len(angles)} hits), the default graph "
@@ -246,4 +244,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

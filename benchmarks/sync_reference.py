@@ -3,7 +3,7 @@ measured flash (``lhgraph decode --sync measured``, the default) or the station'
 sync train (``--sync fitted``: phase and period over the whole capture), on real and on
 simulated raw signals.
 
-    python3 benchmarks/sync_reference.py [--seeds 8] [--output docs/results/sync_reference.md]
+    python -m benchmarks sync_reference [--seeds 8] [--output docs/results/sync_reference.md]
 
 1. **The real sync train** (the libsurvive LH1 recording, MIT, a static HMD on a 48 MHz
    clock): per station, the flashes' residual about the fitted line, about lines fitted to
@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import prog
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.metrics import station_errors
 from lhgraph.io.angles import Angles
@@ -131,14 +132,14 @@ def simulated(seeds: int, jitter_us: float) -> tuple[dict, dict]:
     return errors, seconds
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--output", type=Path, default=ROOT / "docs/results/sync_reference.md")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     check_writable(args.output, overwrite=True)
     lines = ["# Timing a sweep from its own sync flash or from the fitted sync train", "",
-             f"Command: `python3 benchmarks/sync_reference.py --seeds {args.seeds}`  ",
+             f"Command: `python -m benchmarks sync_reference --seeds {args.seeds}`  ",
              f"Machine: {platform.machine()}, Python {platform.python_version()}; "
              f"{time.strftime('%Y-%m-%d')}", ""]
     jitter_us = FALLBACK_JITTER_US

@@ -1,7 +1,7 @@
 """Tracking with the stations held fixed (`lhgraph track`): error against the simulator's
 truth, batch and streaming, and time per sync cycle.
 
-    python benchmarks/track_benchmark.py [--output docs/results/track.md] [--force]
+    python -m benchmarks track_benchmark [--output docs/results/track.md] [--force]
 
 Captures (the true stations and factory calibration given to the tracker):
 1. the 32-diode board on the default layout (8 s, 0.5 m/s, quantisation only), 3 seeds;
@@ -20,27 +20,26 @@ as estimated in the update that added it (filtered), the warm-up's states from i
 
 from __future__ import annotations
 
+import benchmarks._single_thread  # noqa: F401  (first: before numpy loads)
+
+# isort: split
+
+import argparse
+import dataclasses
 import os
+import platform
+import time
+from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+import numpy as np
 
-import argparse  # noqa: E402
-import dataclasses  # noqa: E402
-import platform  # noqa: E402
-import shlex  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-from lhgraph.estimation.graph.streaming import track_stream  # noqa: E402
-from lhgraph.estimation.graph.track import TrackedPath, track  # noqa: E402
-from lhgraph.geometry.transforms import rotation_angle  # noqa: E402
-from lhgraph.io.angles import Angles  # noqa: E402
-from lhgraph.io.files import check_writable, write_atomic  # noqa: E402
-from lhgraph.sim.simulate import (  # noqa: E402
+from benchmarks import command, prog
+from lhgraph.estimation.graph.streaming import track_stream
+from lhgraph.estimation.graph.track import TrackedPath, track
+from lhgraph.geometry.transforms import rotation_angle
+from lhgraph.io.angles import Angles
+from lhgraph.io.files import check_writable, write_atomic
+from lhgraph.sim.simulate import (
     SimulatedCapture,
     default_simulation_config,
     load_simulation_config,
@@ -101,11 +100,11 @@ def run(name: str, cap: SimulatedCapture, angles: Angles, streaming: bool = True
     return rows
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
     parser.add_argument("--output", default=str(ROOT / "docs/results/track.md"))
     parser.add_argument("--force", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
     start = time.perf_counter()
     default = default_simulation_config()
@@ -124,7 +123,7 @@ def main() -> int:
     rows += run("deck.toml 40 s, re-timed", cap, retimed(cap))
     rows += run("deck.toml 40 s, log stamps", cap, cap.angles, streaming=False)
     lines = ["# Tracking with the stations held fixed: measured accuracy and speed", "",
-             f"Command: `python benchmarks/track_benchmark.py {shlex.join(sys.argv[1:])}`  ",
+             f"Command: `{command(__file__, argv)}`  ",
              f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
              f"Python {platform.python_version()}; {time.strftime('%Y-%m-%d')}; run time "
              f"{time.perf_counter() - start:.0f} s", "",
@@ -145,4 +144,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -6,7 +6,7 @@ byte), and, with ``--measure``, times a real download of a synthetic 1.3 MB capt
 ``virtual_board`` paced at the link's baud rate (the firmware core on a pty, the Python
 client of ``lhgraph capture``).
 
-    python benchmarks/transfer_time.py [--measure] [--baud 6000000]
+    python -m benchmarks transfer_time [--measure] [--baud 6000000]
 """
 
 from __future__ import annotations
@@ -15,14 +15,15 @@ import argparse
 import random
 import struct
 import subprocess
-import sys
 import tempfile
 import time
 import zlib
 from pathlib import Path
 
+from benchmarks import prog
+from lhgraph.device.download import download_capture
+
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 BLOCK = 4096
 HEADER_LEN, TRAILER_LEN, RECORD_LEN = 108, 4, 8
@@ -96,8 +97,6 @@ def build_virtual_board() -> Path:
 
 def measure(baud: float, n_records: int, capture: Path | None = None) -> dict[str, float]:
     """Download a capture (default: a synthetic 8 s one) from virtual_board paced at ``baud``."""
-    from lhgraph.device.download import download_capture
-
     exe = build_virtual_board()
     with tempfile.TemporaryDirectory() as tmp:
         if capture is None:
@@ -121,9 +120,9 @@ def measure(baud: float, n_records: int, capture: Path | None = None) -> dict[st
             "rate_kBps": len(data) / result.download_s / 1e3, "identical": float(same)}
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
     """Print the estimate table (and the measurement with --measure)."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.splitlines()[0])
     ap.add_argument("--baud", type=float, default=6e6)
     ap.add_argument("--edges-bytes", type=int, default=1_300_000,
                     help="size of the edge-record capture (default 1.3 MB)")
@@ -132,7 +131,7 @@ def main() -> None:
     ap.add_argument("--capture", type=Path,
                     help="also estimate (and with --measure, time) this .lhcap file, e.g. "
                     "the capture.lhcap of `lhgraph simulate --capture`")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
     raw = 64 * 1024 * 1024
     edges = args.edges_bytes
@@ -167,7 +166,8 @@ def main() -> None:
                   f"Python client): {m['payload']:,} bytes downloaded in "
                   f"{m['download_s']:.2f} s ({m['rate_kBps']:.0f} kB/s), {m['total_s']:.2f} s "
                   f"with INFO/ARM/STATUS, byte-identical: {bool(m['identical'])}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

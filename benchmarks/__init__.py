@@ -1,0 +1,42 @@
+"""lhgraph's benchmarks and real-data checks, one module each (benchmarks/README.md).
+
+Run one with ``python -m benchmarks NAME [ARGS...]`` from the repository root (so that the
+checkout's own ``lhgraph`` is imported); ``python -m benchmarks`` lists them. Every module has
+a docstring whose first paragraph says what it measures and a ``main(argv) -> int`` entry
+point. Modules whose names start with ``_`` are helpers, not benchmarks. This package imports
+only the standard library: listing the benchmarks reads their docstrings without importing
+them.
+"""
+
+from __future__ import annotations
+
+import ast
+import shlex
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def names() -> list[str]:
+    """The benchmarks' module names (``benchmarks/*.py`` not starting with ``_``), sorted."""
+    return sorted(p.stem for p in HERE.glob("*.py") if not p.stem.startswith("_"))
+
+
+def summary(name: str) -> str:
+    """The first paragraph of benchmark ``name``'s docstring on one line, read without
+    importing the module ("" without a docstring)."""
+    doc = ast.get_docstring(ast.parse((HERE / f"{name}.py").read_text(encoding="utf-8")))
+    return " ".join((doc or "").split("\n\n")[0].split())
+
+
+def prog(path: str) -> str:
+    """The command that runs the benchmark in file ``path`` (its ``__file__``): argparse's
+    ``prog``."""
+    return f"python -m benchmarks {Path(path).stem}"
+
+
+def command(path: str, argv: list[str] | None) -> str:
+    """The whole command line that reruns the benchmark in file ``path`` with ``argv``
+    (``None``: this process's ``sys.argv[1:]``), as its results file quotes it."""
+    return shlex.join([*prog(path).split(), *(sys.argv[1:] if argv is None else argv)])
