@@ -63,7 +63,7 @@ def run(seed: int, error_m: float, keep_scale: bool) -> dict[str, dict[str, floa
     out = {}
     for name, sigma in (("file as it is", 0.0), ("sensor offsets solved", SENSOR_OFFSET_SIGMA_M)):
         tic = time.perf_counter()
-        r = solve_graph(wrong, sim.angles, options=GraphOptions(sensor_offset_sigma_m=sigma))
+        r = solve_graph(wrong, sim.angles, options=GraphOptions.of(sensor_offset_sigma_m=sigma))
         seconds = time.perf_counter() - tic
         est = r.stations.relative_to_reference().stations[1]
         xi = se3_log(inverse(truth) @ est.T_world_lh)

@@ -76,7 +76,7 @@ def bounds(sim: SimulatedCapture) -> tuple[float, float, float]:
     simulator's noise (module docstring); and that strength, as a factor on the default
     PSDs."""
     tick_rad = ROTOR_RAD_S / sim.config.sample_rate_hz
-    options = GraphOptions(
+    options = GraphOptions.of(
         angle_sigma_rad=float(np.sqrt(tick_rad**2 / 24 + sim.config.noise.angle_sigma_rad**2)),
         sweep_offset_sigma_rad=tick_rad / np.sqrt(12))
     angles = sim.angles.select(np.flatnonzero(~sim.reflected))
@@ -94,7 +94,7 @@ def run(family: str, config, seed: int | None, estimate: str) -> dict[str, float
     sim = simulate(config, seed)
     models = {k: s.model for k, s in sim.truth.stations.items()}
     result = solve_graph(sim.board, sim.angles, models,
-                         GraphOptions(motion_prior_estimate=estimate))
+                         GraphOptions.of(motion_prior_estimate=estimate))
     truth = sim.truth.relative_to_reference().pose(1)
     est = result.stations.relative_to_reference().stations[1]
     xi = se3_log(inverse(truth) @ est.T_world_lh)
@@ -104,7 +104,7 @@ def run(family: str, config, seed: int | None, estimate: str) -> dict[str, float
             "bound_mm": bound_m * 1e3,
             "known_mm": known_m * 1e3, "psd_factor": psd_factor,
             "solve_psd_factor": float(result.diagnostics["accel_psd_pos"]
-                                      / GraphOptions().accel_psd_pos),
+                                      / GraphOptions().motion.accel_psd_pos),
             "nees": float(xi @ np.linalg.solve(est.covariance, xi)),
             "solve_sigma_mm": float(np.sqrt(np.trace(est.covariance[3:, 3:]))) * 1e3}
 
@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--output", default=str(ROOT / "docs/results/crlb.md"))
     parser.add_argument("--force", action="store_true")
     parser.add_argument("--motion-prior-estimate", choices=PRIOR_ESTIMATES,
-                        default=GraphOptions().motion_prior_estimate,
+                        default=GraphOptions().motion.motion_prior_estimate,
                         help="GraphOptions.motion_prior_estimate of the solves")
     args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)

@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--force", action="store_true")
     args = parser.parse_args(argv)
     out = check_writable(args.output, args.force)
-    full_options = GraphOptions(step_tolerance_sigma=0.0, relative_tolerance=1e-12)
+    full_options = GraphOptions.of(step_tolerance_sigma=0.0, relative_tolerance=1e-12)
     lines = ["# Early stop vs full convergence", "",
              f"Command: `{command(__file__, argv)}`  ",
              f"{time.strftime('%Y-%m-%d')}; 2 s captures, station 1.", "",

@@ -66,7 +66,7 @@ PAPER_NOTE = ("The paper method's residuals are predicted from its only board pa
               "trajectory is that path (reference-station poses only).")
 
 # inlier fractions compare models only at one fixed per-diode sigma (40 µrad)
-FIXED_SIGMA = GraphOptions(adapt_angle_sigma=False)
+FIXED_SIGMA = GraphOptions.of(adapt_angle_sigma=False)
 
 
 def run(method: str, board: Board, angles: Angles, models: dict[int, StationModel],

@@ -58,26 +58,26 @@ from lhgraph.workflow.window import motion_start
 REPO = Path(__file__).resolve().parents[1]
 BAG = REPO.parent / "shared/data/hive-env8/data8.11.bag"
 DEFAULT_OUTPUT = REPO / "docs/results/hive_imu.md"
-CALIBRATED = GraphOptions(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02)
+CALIBRATED = GraphOptions.of(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02)
 VARIANTS = {"light only": (False, GraphOptions()),
             "IMU as read": (True, GraphOptions()),
             "IMU, scale and offset solved": (True, CALIBRATED),
-            "IMU, scale, offset and frame solved": (True, GraphOptions(
+            "IMU, scale, offset and frame solved": (True, GraphOptions.of(
                 gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
                 imu_rotation_sigma_rad=0.1)),
-            "IMU, scale, offset, frame and position solved": (True, GraphOptions(
+            "IMU, scale, offset, frame and position solved": (True, GraphOptions.of(
                 gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
                 imu_rotation_sigma_rad=0.1, imu_position_sigma_m=0.1)),
-            "IMU, scale and offset from the light, combined factors": (True, GraphOptions(
+            "IMU, scale and offset from the light, combined factors": (True, GraphOptions.of(
                 gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02, imu_factors="combined")),
-            "IMU, scale, offset and frame from the light, combined factors": (True, GraphOptions(
+            "IMU, scale, offset and frame from the light, combined factors": (True, GraphOptions.of(
                 gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
                 imu_rotation_sigma_rad=0.1, imu_factors="combined")),
-            "IMU as read, preintegrated gyro": (True, GraphOptions(gyro_preintegration=True)),
-            "IMU, scale, offset and frame solved, preintegrated gyro": (True, GraphOptions(
+            "IMU as read, preintegrated gyro": (True, GraphOptions.of(gyro_preintegration=True)),
+            "IMU, scale, offset and frame solved, preintegrated gyro": (True, GraphOptions.of(
                 gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
                 imu_rotation_sigma_rad=0.1, gyro_preintegration=True)),
-            "the same, its gyro noise held at 0.02 rad/s": (True, GraphOptions(
+            "the same, its gyro noise held at 0.02 rad/s": (True, GraphOptions.of(
                 gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
                 imu_rotation_sigma_rad=0.1, gyro_preintegration=True,
                 adapt_gyro_sigma=False))}
@@ -126,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
         offset = f"{d['imu_time_offset_s'] * 1e3:+.1f}" if "imu_time_offset_s" in d else "-"
         turn = f"{d['imu_rotation_deg']:.2f}" if "imu_rotation_deg" in d else "-"
         position = (", ".join(f"{d[f'imu_position_{a}_m'] * 1e3:+.1f}" for a in "xyz")
-                    if options.imu_position_sigma_m > 0 else "-")
+                    if options.imu.imu_position_sigma_m > 0 else "-")
         noise = (f"{d['preintegration_sigma_rad_s']:.4f}" if "preintegration_sigma_rad_s" in d
                  else "-")
         diffs = []

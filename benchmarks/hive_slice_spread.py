@@ -49,11 +49,11 @@ VARIANTS: dict[str, tuple[float, GraphOptions]] = {
     "station 1 hits +2 ms": (2e-3, GraphOptions()),
     "station 1 hits +4 ms": (4e-3, GraphOptions()),
     "station 1 hits -2 ms": (-2e-3, GraphOptions()),
-    "motion-prior floor 0.02": (0.0, GraphOptions(min_psd_factor=0.02)),
-    "fixed prior 3 m^2/s^3, 30 rad^2/s^3": (0.0, GraphOptions(
+    "motion-prior floor 0.02": (0.0, GraphOptions.of(min_psd_factor=0.02)),
+    "fixed prior 3 m^2/s^3, 30 rad^2/s^3": (0.0, GraphOptions.of(
         adapt_motion_prior=False, accel_psd_pos=3.0, accel_psd_rot=30.0)),
-    "diode biases, prior 20 µrad": (0.0, GraphOptions(diode_bias_sigma_rad=2e-5)),
-    "diode biases, prior 50 µrad": (0.0, GraphOptions(diode_bias_sigma_rad=5e-5)),
+    "diode biases, prior 20 µrad": (0.0, GraphOptions.of(diode_bias_sigma_rad=2e-5)),
+    "diode biases, prior 50 µrad": (0.0, GraphOptions.of(diode_bias_sigma_rad=5e-5)),
 }
 
 
@@ -134,7 +134,7 @@ def tracker_geometry(board: Board, angles: Angles, models: dict, t0: float) -> l
              "of the rests at both ends, lhgraph.estimation.rests; the slices hold no rest), "
              "or the moving span from the motion start to the last slice's end (the slices' "
              "union, without the rests).", ""]
-    cal = solve_graph(board, angles, models, GraphOptions(
+    cal = solve_graph(board, angles, models, GraphOptions.of(
         sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M))
     offsets_mm = np.linalg.norm(cal.sensor_offset_m, axis=1) * 1e3
     lines += [f"Sensor offsets found: rms {np.sqrt(np.mean(offsets_mm**2)):.2f} mm, largest "
@@ -149,7 +149,7 @@ def tracker_geometry(board: Board, angles: Angles, models: dict, t0: float) -> l
         for ref_name, data, options in (
                 ("whole bag", angles, GraphOptions()),
                 (f"whole bag, rests thinned (1 in {REST_KEEP_EVERY})", angles,
-                 GraphOptions(rest_keep_every=REST_KEEP_EVERY)),
+                 GraphOptions.of(rest_keep_every=REST_KEEP_EVERY)),
                 ("moving span", moving, GraphOptions())):
             ref = solve_graph(b, data, models, options)
             d, _, turn = slice_differences(b, angles, models, options, ref, t0)
@@ -166,7 +166,7 @@ def held_out_board(board: Board, angles: Angles, models: dict, inside: np.ndarra
     """``board`` with its sensor positions solved (``SENSOR_OFFSET_SIGMA_M``) on the hits of
     ``angles`` outside the mask ``inside``, their rests thinned 1 in ``rest_keep_every``."""
     cal = solve_graph(board, angles.select(~inside), models,
-                      GraphOptions(sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M,
+                      GraphOptions.of(sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M,
                                    rest_keep_every=rest_keep_every))
     return with_sensor_offsets(board, cal.sensor_offset_m)
 
@@ -175,7 +175,7 @@ def against_whole(board: Board, angles: Angles, models: dict, inside: np.ndarray
                   rest_keep_every: int) -> tuple[np.ndarray, float]:
     """Station 1 solved from the hits ``inside`` less station 1 from all of ``angles`` (both
     with ``board``, rests thinned 1 in ``rest_keep_every``): :func:`difference`."""
-    options = GraphOptions(rest_keep_every=rest_keep_every)
+    options = GraphOptions.of(rest_keep_every=rest_keep_every)
     whole = solve_graph(board, angles, models, options)
     part = solve_graph(board, angles.select(inside), models, options)
     return difference(whole.stations.pose(1), part.stations.pose(1))

@@ -129,7 +129,7 @@ def rms(x: np.ndarray) -> float:
 
 def variant_row(name: str, board: Board, angles: Angles, models: dict, mocap: Trajectory,
                 starts: np.ndarray) -> str:
-    fixed = solve_graph(board, angles, models, GraphOptions(adapt_angle_sigma=False)).residuals
+    fixed = solve_graph(board, angles, models, GraphOptions.of(adapt_angle_sigma=False)).residuals
     whole = solve_graph(board, angles, models)
     al = align_to_mocap(whole.trajectory, mocap)
     dist, turn = held_out_slices(board, angles, models, starts)

@@ -57,8 +57,8 @@ ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs/simulation/default.toml"
 FACING = ROOT / "configs/simulation/facing_planar_imu.toml"
 IMU = ImuConfig(rate_hz=1000.0)
-PREINTEGRATED = GraphOptions(gyro_preintegration=True)
-SIMULATED_NOISE = GraphOptions(gyro_preintegration=True, gyro_sigma_rad_s=IMU.gyro_sigma_rad_s,
+PREINTEGRATED = GraphOptions.of(gyro_preintegration=True)
+SIMULATED_NOISE = GraphOptions.of(gyro_preintegration=True, gyro_sigma_rad_s=IMU.gyro_sigma_rad_s,
                                accel_sigma_mps2=2.5 * IMU.accel_sigma_mps2)
 """The IMU factors' noise set to the simulated part's instead of the defaults (set for the
 real deck's vibration): its gyro noise per reading, and 2.5x its accelerometer noise (the

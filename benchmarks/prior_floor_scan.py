@@ -48,7 +48,7 @@ def errors(config: SimulationConfig, seed: int | None, floors: list[float]
     T_true = sim.truth.relative_to_reference().pose(1)
     out = []
     for floor in floors:
-        result = solve_graph(sim.board, sim.angles, models, GraphOptions(min_psd_factor=floor))
+        result = solve_graph(sim.board, sim.angles, models, GraphOptions.of(min_psd_factor=floor))
         est = result.stations.relative_to_reference()
         xi = se3_log(inverse(T_true) @ est.pose(1))
         out.append((float(np.linalg.norm(est.pose(1)[:3, 3] - T_true[:3, 3]) * 1e3),

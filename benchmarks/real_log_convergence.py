@@ -47,8 +47,9 @@ from benchmarks.crazyflie_real_solve import LOGS, lhgraph
 from lhgraph.estimation.graph.factors import build_graph
 from lhgraph.estimation.graph.noise import NoiseAdaptation
 from lhgraph.estimation.graph.optimizer import LMParams, levenberg_marquardt
-from lhgraph.estimation.graph.options import STEP_TOLERANCE_SIGMA, GraphOptions
-from lhgraph.estimation.graph.solver import graph_preparation, resolve_estimates, solve_graph
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.resolve import STEP_TOLERANCE_SIGMA, prepare, resolve_options
+from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.graph.variables import BOARD_POSE, STATION_POSE, initial_values
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.problem import build_problem
@@ -63,7 +64,7 @@ LOG = LOGS["lh1"]
 STAGES = {"elimination": "eliminateMultifrontal", "linearisation": "linearize",
           "back-substitution": "optimize", "retraction": "retract"}
 """Table row -> the name of the GTSAM built-in whose time it is."""
-DEFAULT_CAP = GraphOptions().max_iterations
+DEFAULT_CAP = GraphOptions().optimizer.max_iterations
 
 
 def builtin_seconds(stats: pstats.Stats, name: str) -> float:
@@ -81,9 +82,9 @@ def callback_seconds(stats: pstats.Stats) -> float:
 def default_graph(board, angles, models, cap: int):
     """The default solve's graph, evaluator, initial values, LM parameters (limit ``cap``)
     and options, as ``solve_graph`` builds them for this log."""
-    options = GraphOptions(max_iterations=cap)
-    angles, options, few = graph_preparation(angles, options, None, models)
-    options = resolve_estimates(options, few, False)
+    options = GraphOptions.of(max_iterations=cap)
+    angles, facts = prepare(angles, options, models)
+    options = resolve_options(options, facts).options
     problem = build_problem(board, angles, models, angles.stations()[0])
     graph, ev = build_graph(problem, options)
     values = initial_values(ev.layout, FewDiodeInitialiser()(board, angles, problem))
@@ -171,10 +172,10 @@ def main(argv: list[str] | None = None) -> int:
                                "--output", str(imp / "stations.toml"), "--force", "--quiet")[1]
                        for _ in range(args.runs))
         print(f"whole process: median {np.median(whole):.2f} s", flush=True)
-    variants = [(f"limit {cap}", GraphOptions(max_iterations=cap)) for cap in sorted(args.caps)]
+    variants = [(f"limit {cap}", GraphOptions.of(max_iterations=cap)) for cap in sorted(args.caps)]
     variants.append(("95 % of the states' steps, limit 120",
-                     GraphOptions(max_iterations=120, board_step_quantile=0.95,
-                                  step_tolerance_sigma=STEP_TOLERANCE_SIGMA)))
+                     GraphOptions.of(max_iterations=120, board_step_quantile=0.95,
+                                     step_tolerance_sigma=STEP_TOLERANCE_SIGMA)))
     runs = []
     for label, options in variants:
         tic = time.perf_counter()

@@ -24,6 +24,7 @@ from lhgraph.errors import InputError
 
 T = TypeVar("T")
 RULE = "lhgraph.rule"
+GROUP = "lhgraph.group"
 _MISSING: Any = dataclasses.MISSING
 KIND_WORDS = {bool: "true or false", int: "an integer", float: "a finite number",
               str: "a string", Path: "a path string"}
@@ -106,6 +107,18 @@ def option(default: Any = _MISSING, *, kind: type | None = None, gt: float | Non
     if factory is not _MISSING:
         return dataclasses.field(default_factory=factory, metadata={RULE: rule})
     return dataclasses.field(default=default, metadata={RULE: rule})
+
+
+def group(cls: type) -> Any:
+    """A dataclass field holding a group of options: an options dataclass ``cls``, made
+    with its defaults. A TOML table gives the group's options flat or in a sub-table named
+    after the field (:func:`load_options`)."""
+    return dataclasses.field(default_factory=cls, metadata={GROUP: cls})
+
+
+def groups(cls: type) -> dict[str, type]:
+    """The option groups of a dataclass (:func:`group` fields), by field name."""
+    return {f.name: f.metadata[GROUP] for f in dataclasses.fields(cls) if GROUP in f.metadata}
 
 
 def rules(cls: type) -> dict[str, Rule]:
@@ -226,7 +239,11 @@ class Table:
 
 def load_options(cls: type[T], data: Any, source: str | Path, where: str = "") -> T:
     """An options dataclass from a TOML table: unknown keys, wrong types and values out of
-    their declared range raise InputError naming ``source`` and the key."""
+    their declared range raise InputError naming ``source`` and the key. A class of option
+    groups (:func:`group`) takes each group's options flat in the table or in the group's
+    sub-table, not both."""
+    if groups(cls):
+        return _load_groups(cls, data, source, where)
     table = Table(data, source, where)
     declared = rules(cls)
     table.refuse_unknown(set(declared) | {r.alias for r in declared.values() if r.alias})
@@ -239,6 +256,27 @@ def load_options(cls: type[T], data: Any, source: str | Path, where: str = "") -
             raise
         raise InputError(exc.problem, source, table.key(exc.where) if exc.where else where
                          or None) from None
+
+
+def _load_groups(cls: type[T], data: Any, source: str | Path, where: str) -> T:
+    """:func:`load_options` of a class of option groups."""
+    table = Table(data, source, where)
+    found = groups(cls)
+    owner = {name: g for g, group_cls in found.items() for name in rules(group_cls)}
+    owner |= {r.alias: g for g, group_cls in found.items()
+              for r in rules(group_cls).values() if r.alias}
+    table.refuse_unknown(set(owner) | set(found))
+    values = {}
+    for g, group_cls in found.items():
+        flat = {k: v for k, v in table.data.items() if owner.get(k) == g}
+        nested = table.table(g)
+        for key in flat:
+            if key in nested:
+                raise InputError(f"give '{key}' in [{table.key(g)}] or flat, not both", source,
+                                 table.key(key))
+        values[g] = load_options(group_cls, {**flat, **nested.data}, source,
+                                 nested.where if nested.data and not flat else where)
+    return cls(**values)
 
 
 def override(obj: T, flags: Mapping[str, tuple[str, Any]]) -> T:

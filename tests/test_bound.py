@@ -27,14 +27,14 @@ def test_bound_matches_the_monte_carlo_spread():
     models = {k: s.model for k, s in sim.truth.stations.items()}
     problem = build_problem(sim.board, sim.angles, models, 0)
     truth_values = true_values(sim.motion.pose, sim.truth, problem.state_time)
-    options = GraphOptions(angle_sigma_rad=SIGMA, sweep_offset_sigma_rad=2.3e-6)
+    options = GraphOptions.of(angle_sigma_rad=SIGMA, sweep_offset_sigma_rad=2.3e-6)
     bound = information_bound(problem, truth_values, options)
     known = information_bound(problem, truth_values, options, known_path=True)
     assert known.position_rms_m(1) < 0.5 * bound.position_rms_m(1)
-    solve_options = dataclasses.replace(
-        options, adapt_angle_sigma=False, adapt_motion_prior=False, loss="huber",
-        huber_k=GAUSSIAN_HUBER_K, accel_psd_rot=options.accel_psd_rot * bound.psd_factor,
-        accel_psd_pos=options.accel_psd_pos * bound.psd_factor)
+    solve_options = options.with_values(
+        adapt_angle_sigma=False, adapt_motion_prior=False, loss="huber",
+        huber_k=GAUSSIAN_HUBER_K, accel_psd_rot=options.motion.accel_psd_rot * bound.psd_factor,
+        accel_psd_pos=options.motion.accel_psd_pos * bound.psd_factor)
     rng = np.random.default_rng(0)
     truth = sim.truth.relative_to_reference().pose(1)
     errors = []

@@ -60,7 +60,7 @@ def test_preintegration_predicts_the_true_motion(short_deck):
     imu = simulate_imu(short_deck, ImuConfig(rate_hz=1000.0, **STILL_BIAS), seed=3)
     times = np.arange(0.5, 19.5, 0.02)
     T, v = true_states(short_deck, times)
-    pre = preintegrate(imu.stream, times, GraphOptions(imu_noise_factor=1.0))
+    pre = preintegrate(imu.stream, times, GraphOptions.of(imu_noise_factor=1.0))
     assert len(pre.steps) == len(times) - 1 and len(pre.gaps) == 0
     bias = gtsam.imuBias.ConstantBias(imu.bias[3:], imu.bias[:3])
     values = gtsam.Values()
@@ -126,15 +126,15 @@ def test_bias_family_round_trip():
 
 
 def test_imu_factor_choice():
-    assert GraphOptions().imu_factor_kind == "combined"
-    assert GraphOptions(gyro_scale_sigma=0.1).imu_factor_kind == "twist"
-    assert GraphOptions(gyro_preintegration=True).imu_factor_kind == "twist"
-    assert GraphOptions(imu_factors="twist").imu_factor_kind == "twist"
-    assert GraphOptions(imu_factors="combined", imu_time_offset_sigma_s=0.01).imu_calibrated
+    assert GraphOptions().imu.factor_kind == "combined"
+    assert GraphOptions.of(gyro_scale_sigma=0.1).imu.factor_kind == "twist"
+    assert GraphOptions.of(gyro_preintegration=True).imu.factor_kind == "twist"
+    assert GraphOptions.of(imu_factors="twist").imu.factor_kind == "twist"
+    assert GraphOptions.of(imu_factors="combined", imu_time_offset_sigma_s=0.01).imu.calibrated
     with pytest.raises(InputError, match="imu_factors"):
-        GraphOptions(imu_factors="combined", imu_position_sigma_m=0.01)
+        GraphOptions.of(imu_factors="combined", imu_position_sigma_m=0.01)
     with pytest.raises(InputError, match="imu_factors"):
-        GraphOptions(imu_factors="combined", gyro_preintegration=True)
+        GraphOptions.of(imu_factors="combined", gyro_preintegration=True)
 
 
 def test_facing_stations_solve_with_the_combined_factors():
@@ -143,7 +143,7 @@ def test_facing_stations_solve_with_the_combined_factors():
     # within 0.2 deg and the gyro bias within 1e-3 rad/s of the simulation's
     sim = simulate(load_simulation_config(FACING), 1)
     models = {k: s.model for k, s in sim.truth.stations.items()}
-    result = solve_graph(sim.board, sim.angles, models, GraphOptions(imu_factors="combined"),
+    result = solve_graph(sim.board, sim.angles, models, GraphOptions.of(imu_factors="combined"),
                          imu=sim.imu.stream)
     error = station_errors(sim.truth, result.stations)[0]
     assert error.position_norm_m < 2e-3 and np.degrees(error.rotation_rad) < 0.05, error
@@ -179,7 +179,7 @@ def test_deck_with_a_hole_in_the_imu_solves(short_deck):
 
     with pytest.raises(SolverError, match="few-diode"):
         solve_graph(short_deck.board, short_deck.angles, models,
-                    GraphOptions(imu_factors="combined", gyro_scale_sigma=0.1), imu=holed)
+                    GraphOptions.of(imu_factors="combined", gyro_scale_sigma=0.1), imu=holed)
 
 
 def test_an_imu_that_misfits_the_light_falls_back_to_the_twist_factors():
@@ -195,7 +195,7 @@ def test_an_imu_that_misfits_the_light_falls_back_to_the_twist_factors():
     result = solve_graph(sim.board, sim.angles, models, imu=sim.imu.stream)
     assert any("refined with the twist factors" in w for w in result.warnings)
     assert "accel_sigma_mps2" in result.diagnostics  # the twist factors' summary
-    kept = solve_graph(sim.board, sim.angles, models, GraphOptions(imu_factors="combined"),
+    kept = solve_graph(sim.board, sim.angles, models, GraphOptions.of(imu_factors="combined"),
                        imu=sim.imu.stream)
     assert not any("twist" in w for w in kept.warnings)
     assert any("the IMU disagrees with the light" in w for w in kept.warnings)
@@ -236,7 +236,7 @@ def test_combined_factors_with_the_calibration_from_the_light(miscalibrated_imu)
     asked = dict(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
                  imu_rotation_sigma_rad=0.1)
     result = solve_graph(sim.board, sim.angles, models,
-                         GraphOptions(imu_factors="combined", **asked), imu=sim.imu.stream)
+                         GraphOptions.of(imu_factors="combined", **asked), imu=sim.imu.stream)
     error = station_errors(sim.truth, result.stations)[0]
     assert error.position_norm_m < 1e-3, error
     d = result.diagnostics
@@ -246,7 +246,7 @@ def test_combined_factors_with_the_calibration_from_the_light(miscalibrated_imu)
     assert d["imu_chi2_rotation"] < 1.0 and not result.warnings
     with pytest.raises(InputError, match="imu_factors"):
         track(sim.board, sim.angles, sim.truth, models,
-              GraphOptions(imu_factors="combined", **asked), imu=sim.imu.stream)
+              GraphOptions.of(imu_factors="combined", **asked), imu=sim.imu.stream)
 
 
 def test_a_stream_that_covers_no_step_is_refused(short_deck):
@@ -256,4 +256,4 @@ def test_a_stream_that_covers_no_step_is_refused(short_deck):
     models = {k: s.model for k, s in short_deck.truth.stations.items()}
     with pytest.raises(InputError, match="covers no step"):
         solve_graph(short_deck.board, short_deck.angles, models,
-                    GraphOptions(imu_max_gap_s=0.05), imu=sparse)
+                    GraphOptions.of(imu_max_gap_s=0.05), imu=sparse)

@@ -43,11 +43,30 @@ def test_unknown_key_lists_allowed(tmp_path: Path) -> None:
     assert "max_iterations" in message and "\n" not in message
 
 
+def test_graph_options_flat_or_by_group(tmp_path: Path) -> None:
+    """A [graph] option may be given flat or in its group's table; both name the key."""
+    flat = load_options(GraphOptions, {"max_iterations": 7, "loss": "huber"}, "x.toml", "graph")
+    nested = load_options(GraphOptions, {"optimizer": {"max_iterations": 7},
+                                         "robust": {"loss": "huber"}}, "x.toml", "graph")
+    assert flat == nested == GraphOptions.of(max_iterations=7, loss="huber")
+    assert flat.optimizer.max_iterations == 7 and flat.robust.loss == "huber"
+    with pytest.raises(InputError, match="x.toml:graph.optimizer.max_iterations: must be > 0"):
+        load_options(GraphOptions, {"optimizer": {"max_iterations": 0}}, "x.toml", "graph")
+    with pytest.raises(InputError, match="not both"):
+        load_options(GraphOptions, {"max_iterations": 3, "optimizer": {"max_iterations": 4}},
+                     "x.toml", "graph")
+    with pytest.raises(InputError, match="unknown key 'loss'"):  # in the wrong group
+        load_options(GraphOptions, {"optimizer": {"loss": "huber"}}, "x.toml", "graph")
+    with pytest.raises(InputError, match="no graph option 'max_iteration'"):
+        GraphOptions.of(max_iteration=3)
+    assert GraphOptions().flat()["max_iterations"] == 60 and len(GraphOptions().flat()) == 47
+
+
 def test_python_construction_validated() -> None:
     with pytest.raises(InputError, match="max_iterations: must be > 0"):
-        GraphOptions(max_iterations=0)
+        GraphOptions.of(max_iterations=0)
     with pytest.raises(dataclasses.FrozenInstanceError):
-        GraphOptions().max_iterations = 3  # type: ignore[misc]
+        GraphOptions().optimizer.max_iterations = 3  # type: ignore[misc]
 
 
 def test_duration_old_spelling(tmp_path: Path) -> None:
@@ -74,9 +93,17 @@ def test_override_names_the_flag() -> None:
 
 def test_solve_does_not_mutate_options() -> None:
     sim = simulate(dataclasses.replace(default_simulation_config(), duration_s=1.5), 3)
-    options = GraphOptions(max_iterations=5)
-    solve(sim.board, sim.angles, "graph", reference=1, graph_options=options)
-    assert options == GraphOptions(max_iterations=5)
+    options = GraphOptions.of(max_iterations=5)
+    result = solve(sim.board, sim.angles, "graph", reference=1, graph_options=options)
+    assert options == GraphOptions.of(max_iterations=5)
+    # the result says what ran: every choice resolved, and which rule decided it
+    ran = result.options
+    assert ran["optimizer"]["max_iterations"] == 5 and ran["data"]["reference"] == 1
+    assert ran["optimizer"]["step_tolerance_sigma"] == 0.05
+    assert ran["motion"]["motion_prior_estimate"] == "chi2"
+    assert any(r.startswith("motion_prior_estimate = 'chi2' (auto")
+               for r in result.option_rules)
+    assert not any(r.startswith("reference") for r in result.option_rules)  # given: kept
 
 
 @pytest.fixture(scope="module")

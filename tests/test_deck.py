@@ -11,13 +11,15 @@ import pytest
 
 from lhgraph.errors import InputError, SolverError
 from lhgraph.estimation.graph.optimizer import LMParams
-from lhgraph.estimation.graph.options import (
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.resolve import (
     FEW_DIODE_CALIBRATION,
-    FEW_DIODE_TRACKING,
     STEP_TOLERANCE_SIGMA,
-    GraphOptions,
+    few_diode,
+    prepare,
+    resolve_options,
 )
-from lhgraph.estimation.graph.solver import few_diode, graph_preparation, solve_graph
+from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp import board_poses, planar_twins
 from lhgraph.estimation.init.twins import resolve_twins
@@ -58,23 +60,33 @@ def test_few_diode_stopping_rule_when_calibrating_and_when_tracking(deck_capture
     95 % of the states (the path is the product) and the root variables as any solve does;
     a user's settings are kept and many-diode data keeps every state and 0.05 sigma."""
     angles = deck_capture.angles
-    _, calibrating, few = graph_preparation(angles, GraphOptions())
-    assert few and calibrating.board_step_quantile == FEW_DIODE_CALIBRATION.board_step_quantile
+    _, facts = prepare(angles, GraphOptions())
+    assert facts.few_diode
+    resolved = resolve_options(GraphOptions(), facts)
+    calibrating = resolved.options.optimizer
+    assert resolved.options.noise.angle_sigma_rad == GraphOptions().noise.few_diode_sigma_rad
+    assert any(line.startswith("angle_sigma_rad = 6.5e-05 (few-diode data")
+               for line in resolved.applied)  # the override is said, not hidden
+    assert calibrating.board_step_quantile == FEW_DIODE_CALIBRATION.board_step_quantile
     assert calibrating.board_step_quantile == 0.5
     assert calibrating.step_tolerance_sigma == FEW_DIODE_CALIBRATION.step_tolerance_sigma
     assert calibrating.step_tolerance_sigma == 0.25
-    _, tracking, _ = graph_preparation(angles, GraphOptions(), stop=FEW_DIODE_TRACKING)
+    tracking = resolve_options(GraphOptions(), facts, tracking=True).options.optimizer
     assert tracking.board_step_quantile == 0.95
     assert tracking.step_tolerance_sigma == STEP_TOLERANCE_SIGMA == 0.05
-    _, chosen, _ = graph_preparation(angles, GraphOptions(board_step_quantile=0.8,
-                                                          step_tolerance_sigma=0.0))
-    assert chosen.board_step_quantile == 0.8 and chosen.step_tolerance_sigma == 0.0
+    given = GraphOptions.of(board_step_quantile=0.8, step_tolerance_sigma=0.0)
+    chosen = resolve_options(given, facts)
+    assert chosen.options.optimizer.board_step_quantile == 0.8
+    assert chosen.options.optimizer.step_tolerance_sigma == 0.0
+    assert not any("step" in line for line in chosen.applied)  # the user's kept, unsaid
     board = simulate(SimulationConfig(duration_s=1.0), seed=1)  # the 32-diode board
-    _, many, few_many = graph_preparation(board.angles, GraphOptions())
-    assert not few_many and many.board_step_quantile is None
-    assert many.step_tolerance_sigma is None
-    assert LMParams.from_options(many).step_tolerance_sigma == STEP_TOLERANCE_SIGMA
-    assert LMParams.from_options(chosen).step_tolerance_sigma == 0.0
+    _, many_facts = prepare(board.angles, GraphOptions())
+    many = resolve_options(GraphOptions(), many_facts)
+    assert not many_facts.few_diode and many.options.optimizer.board_step_quantile == 1.0
+    assert LMParams.from_options(many.options).step_tolerance_sigma == STEP_TOLERANCE_SIGMA
+    assert any(line.startswith("step_tolerance_sigma = 0.05") for line in many.applied)
+    with pytest.raises(ValueError, match="resolved"):
+        LMParams.from_options(GraphOptions())  # the rule is applied once, never skipped
 
 
 def test_logging_options_checked():

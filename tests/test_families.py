@@ -23,9 +23,9 @@ from lhgraph.sim.simulate import default_simulation_config, simulate
 
 OPTIONS = {
     "plain": GraphOptions(),
-    "corrections": GraphOptions(diode_bias_sigma_rad=1e-4, sensor_offset_sigma_m=1e-3),
-    "twist": GraphOptions(imu_factors="twist", gyro_scale_sigma=0.1, gyro_preintegration=True),
-    "combined": GraphOptions(imu_factors="combined"),
+    "corrections": GraphOptions.of(diode_bias_sigma_rad=1e-4, sensor_offset_sigma_m=1e-3),
+    "twist": GraphOptions.of(imu_factors="twist", gyro_scale_sigma=0.1, gyro_preintegration=True),
+    "combined": GraphOptions.of(imu_factors="combined"),
 }
 
 
@@ -40,8 +40,8 @@ def built(request, capture):
     options = OPTIONS[request.param]
     problem = build_problem(capture.board, capture.angles, {}, capture.truth.indices()[0])
     init = PnPKabschInitialiser()(capture.board, capture.angles, problem)
-    inertial = (inertial_data(capture.imu.stream, problem.state_time, options.imu_max_gap_s)
-                if options.imu_factors != "auto" else None)
+    inertial = (inertial_data(capture.imu.stream, problem.state_time, options.imu.imu_max_gap_s)
+                if options.imu.imu_factors != "auto" else None)
     graph, ev = build_graph(problem, options, inertial=inertial)
     gravity = None if inertial is None else initial_gravity(inertial, init.X)
     return graph, ev, initial_values(ev.layout, init, gravity)
@@ -74,7 +74,7 @@ def test_cost_is_the_graphs_error(built):
 def test_missing_variables_are_refused(capture):
     problem = build_problem(capture.board, capture.angles, {}, capture.truth.indices()[0])
     options = OPTIONS["twist"]
-    inertial = inertial_data(capture.imu.stream, problem.state_time, options.imu_max_gap_s)
+    inertial = inertial_data(capture.imu.stream, problem.state_time, options.imu.imu_max_gap_s)
     families = factor_families(problem, graph_layout(problem, options, False, True), options,
                                inertial)
     with pytest.raises(ValueError, match="IMU calibration"):

@@ -22,6 +22,7 @@ from lhgraph.estimation.graph.optimizer import (
     remaining_sigmas,
 )
 from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.resolve import DataFacts, resolve_options
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.graph.variables import (
     BOARD_POSE,
@@ -98,7 +99,7 @@ def test_reflections_are_rejected():
 
 def test_reference_station_defines_the_world():
     sim = _capture("default", duration_s=2.0)
-    result = solve_graph(sim.board, sim.angles, options=GraphOptions(reference=1))
+    result = solve_graph(sim.board, sim.angles, options=GraphOptions.of(reference=1))
     assert result.stations.reference == 1
     np.testing.assert_allclose(result.stations.pose(1), np.eye(4))
     (err,) = station_errors(sim.truth, result.stations)
@@ -117,8 +118,8 @@ def test_isam2_agrees_with_lm():
     coordinate (LM stops when it is within 0.05 sigma of convergence)."""
     sim = _capture("default", duration_s=1.0)
     a = solve_graph(sim.board, sim.angles,
-                    options=GraphOptions(solver="lm", adapt_motion_prior=False))
-    b = solve_graph(sim.board, sim.angles, options=GraphOptions(solver="isam2"))
+                    options=GraphOptions.of(solver="lm", adapt_motion_prior=False))
+    b = solve_graph(sim.board, sim.angles, options=GraphOptions.of(solver="isam2"))
     difference = se3_log(inverse(a.stations.pose(1)) @ b.stations.pose(1))
     sigma = np.sqrt(np.diag(a.stations.stations[1].covariance))
     assert np.all(np.abs(difference) < 0.1 * sigma)
@@ -129,10 +130,10 @@ def test_motion_prior_adapts_to_the_motion():
     update lowers the prior's PSD until its whitened residuals have unit variance, or to the
     floor; with a wider floor it reaches chi2/dof ~ 1."""
     sim = _capture("default")
-    start = GraphOptions()
+    start = GraphOptions().motion
     d = solve_graph(sim.board, sim.angles).diagnostics
     assert d["accel_psd_pos"] == pytest.approx(start.min_psd_factor * start.accel_psd_pos)
-    free = solve_graph(sim.board, sim.angles, options=GraphOptions(min_psd_factor=1e-4))
+    free = solve_graph(sim.board, sim.angles, options=GraphOptions.of(min_psd_factor=1e-4))
     assert free.diagnostics["accel_psd_pos"] < 0.1 * start.accel_psd_pos
     assert 0.7 < free.diagnostics["motion_chi2_per_dof"] < 1.4
 
@@ -168,7 +169,7 @@ def test_angle_noise_is_learned_from_the_residuals():
     assert result.residuals.inlier_fraction() > 0.97
     clean = _capture("default")
     assert solve_graph(clean.board, clean.angles).diagnostics["angle_sigma_rad"] == (
-        pytest.approx(GraphOptions().angle_sigma_rad, rel=0.02))
+        pytest.approx(GraphOptions().noise.angle_sigma_rad, rel=0.02))
 
 
 def test_consistent_path_drops_jumps_and_turned_twins():
@@ -216,13 +217,13 @@ def test_numpy_cost_is_the_graph_error(loss):
     motion priors), also after the noise levels were rescaled; with reflections, so the
     robust branch of the loss is exercised."""
     sim = _capture("default", duration_s=1.0, reflection_fraction=0.03)
-    options = GraphOptions(loss=loss)
+    options = GraphOptions.of(loss=loss)
     _, graph, ev, values = _graph(sim, options)
     assert ev.cost(values) == pytest.approx(graph.error(values), rel=1e-12)
     ev.motion.scale(0.3)
     ev.bearing.scale_noise(2.0)
     assert ev.cost(values) == pytest.approx(graph.error(values), rel=1e-12)
-    assert np.abs(ev.bearing.whitened_residuals()).max() > 3 * options.huber_k
+    assert np.abs(ev.bearing.whitened_residuals()).max() > 3 * options.robust.huber_k
 
 
 def test_rescaled_linearisation_is_the_one_made_at_those_levels():
@@ -236,9 +237,9 @@ def test_rescaled_linearisation_is_the_one_made_at_those_levels():
     first, _ = graph.linearize(values).jacobian()  # the Jacobians at the first levels
     ev.motion.scale(0.3)
     ev.bearing.scale_noise(2.0)
-    levels = dataclasses.replace(options, angle_sigma_rad=options.angle_sigma_rad * np.sqrt(2.0),
-                                 accel_psd_rot=options.accel_psd_rot * 0.3,
-                                 accel_psd_pos=options.accel_psd_pos * 0.3)
+    levels = options.with_values(angle_sigma_rad=options.noise.angle_sigma_rad * np.sqrt(2.0),
+                                 accel_psd_rot=options.motion.accel_psd_rot * 0.3,
+                                 accel_psd_pos=options.motion.accel_psd_pos * 0.3)
     _, built_graph, _, _ = _graph(sim, levels)
     A, b = graph.linearize(values).jacobian()
     A_built, b_built = built_graph.linearize(values).jacobian()
@@ -265,7 +266,7 @@ def test_diode_biases_are_estimated_with_the_stations():
                                        angles.check_board(sim.board)]
     plain = solve_graph(sim.board, angles)
     assert plain.diode_bias_rad is None
-    biased = solve_graph(sim.board, angles, options=GraphOptions(diode_bias_sigma_rad=1e-4))
+    biased = solve_graph(sim.board, angles, options=GraphOptions.of(diode_bias_sigma_rad=1e-4))
     err_plain = station_errors(sim.truth, plain.stations)[0].position_norm_m
     err = station_errors(sim.truth, biased.stations)[0].position_norm_m
     assert err_plain > 2e-3 and err < 0.4 * err_plain
@@ -277,7 +278,7 @@ def test_diode_biases_are_estimated_with_the_stations():
             a, b = found[axis, seen], bias[s, axis, seen]
             assert np.corrcoef(a - a.mean(), b - b.mean())[0, 1] > 0.9
     # the numpy cost is the graph's error with diode biases and sensor offsets in it
-    options = GraphOptions(diode_bias_sigma_rad=1e-4, sensor_offset_sigma_m=3e-4)
+    options = GraphOptions.of(diode_bias_sigma_rad=1e-4, sensor_offset_sigma_m=3e-4)
     problem = build_problem(sim.board, angles, {}, 0)
     graph, ev = build_graph(problem, options)
     values = initial_values(ev.layout, PnPKabschInitialiser()(sim.board, angles, problem))
@@ -307,7 +308,7 @@ def test_covariance_from_the_last_iteration_matches_marginals_at_the_result():
     new linearisation) agrees with GTSAM's ``Marginals`` of a fresh linearisation at the
     solution."""
     sim = _capture("default", duration_s=2.0)
-    options = GraphOptions()
+    options = resolve_options(GraphOptions(), DataFacts(False, False, 0)).options
     _, graph, ev, values = _graph(sim, options)
     fit = levenberg_marquardt(graph, values, ev.cost, ev.layout, LMParams.from_options(options),
                               NoiseAdaptation(graph, ev, options))
@@ -344,11 +345,11 @@ def test_redundancy_estimate_loosens_the_prior_without_a_floor():
     the estimate lands between that and the floor's start, and a solve with it still finds
     the stations."""
     sim = _capture("default", duration_s=3.0)
-    plain = solve_graph(sim.board, sim.angles, _models(sim), GraphOptions(min_psd_factor=1e-4))
+    plain = solve_graph(sim.board, sim.angles, _models(sim), GraphOptions.of(min_psd_factor=1e-4))
     counted = solve_graph(sim.board, sim.angles, _models(sim),
-                          GraphOptions(motion_prior_estimate="redundancy"))
+                          GraphOptions.of(motion_prior_estimate="redundancy"))
     assert plain.diagnostics["accel_psd_pos"] < counted.diagnostics["accel_psd_pos"]
-    assert counted.diagnostics["accel_psd_pos"] < GraphOptions().accel_psd_pos
+    assert counted.diagnostics["accel_psd_pos"] < GraphOptions().motion.accel_psd_pos
     assert counted.status == "converged"
     assert station_errors(sim.truth, counted.stations)[0].position_norm_m < 3e-3
 
@@ -368,7 +369,7 @@ def test_noise_levels_follow_the_solution_after_a_bad_start(name, seed):
     result = solve_graph(sim.board, sim.angles, _models(sim), initialiser=bad_start)
     assert result.status == "converged"
     spread = max(1.4826 * np.median(np.abs(result.residuals.residual_rad)),
-                 GraphOptions().angle_sigma_rad)
+                 GraphOptions().noise.angle_sigma_rad)
     assert spread <= result.diagnostics["angle_sigma_rad"] < 1.25 * spread
     truth = sim.truth.stations[1].T_world_lh
     assert np.linalg.norm(result.stations.pose(1)[:3, 3] - truth[:3, 3]) < 3e-3
@@ -381,7 +382,7 @@ def test_early_stop_is_close_to_full_convergence(name, seed):
     (per coordinate) of where LM run to a 1e-12 relative error change ends."""
     sim = _capture(name, duration_s=2.0, seed=seed)
     early = solve_graph(sim.board, sim.angles)
-    full = solve_graph(sim.board, sim.angles, options=GraphOptions(
+    full = solve_graph(sim.board, sim.angles, options=GraphOptions.of(
         step_tolerance_sigma=0.0, relative_tolerance=1e-12))
     difference = se3_log(inverse(early.stations.pose(1)) @ full.stations.pose(1))
     sigma = np.sqrt(np.diag(full.stations.stations[1].covariance))

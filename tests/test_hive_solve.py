@@ -118,10 +118,10 @@ def test_hive_imu_scale_solved_and_a_wrong_scale_flagged(hive_import):
         out / "angles.csv"), 8.0)
     imu = load_imu(out / "imu.csv")
     models = station_models(out / "ootx.toml", Convention(-1, 1))
-    as_read = solve_graph(board, angles, models, GraphOptions(gyro_preintegration=True),
+    as_read = solve_graph(board, angles, models, GraphOptions.of(gyro_preintegration=True),
                           imu=imu)
     assert any("the IMU disagrees with the light" in w for w in as_read.warnings)
-    solved = solve_graph(board, angles, models, GraphOptions(
+    solved = solve_graph(board, angles, models, GraphOptions.of(
         gyro_preintegration=True, gyro_scale_sigma=1.0), imu=imu)
     scales = [solved.diagnostics[f"gyro_scale_{a}"] for a in "xyz"]
     assert all(0.43 < s < 0.57 for s in scales), scales

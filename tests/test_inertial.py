@@ -236,7 +236,7 @@ def test_real_crazyflie_imu_fits_the_light(tmp_path):
     def diagnostics(kind: str) -> dict[str, float]:
         return track(crazyflie_deck(), angles,
                      load_stations(tmp_path / "stations-cfclient.toml"),
-                     station_models(tmp_path / "ootx.toml"), GraphOptions(imu_factors=kind),
+                     station_models(tmp_path / "ootx.toml"), GraphOptions.of(imu_factors=kind),
                      imu=load_imu(tmp_path / "imu.csv")).diagnostics
 
     d = diagnostics("twist")
@@ -258,10 +258,10 @@ def test_gyro_scale_and_time_offset_are_solved(miscalibrated_imu):
 
     sim = miscalibrated_imu
     models = {k: s.model for k, s in sim.truth.stations.items()}
-    as_read = solve_graph(sim.board, sim.angles, models, GraphOptions(imu_factors="twist"),
+    as_read = solve_graph(sim.board, sim.angles, models, GraphOptions.of(imu_factors="twist"),
                          imu=sim.imu.stream)
     solved = solve_graph(sim.board, sim.angles, models,
-                         GraphOptions(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
+                         GraphOptions.of(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
                                       imu_rotation_sigma_rad=0.1),
                          imu=sim.imu.stream)
     d = solved.diagnostics
@@ -292,9 +292,9 @@ def test_imu_position_is_solved():
                       position_z_m=position[2]))
     sim = simulate(config, 1)
     models = {k: s.model for k, s in sim.truth.stations.items()}
-    as_read = solve_graph(sim.board, sim.angles, models, GraphOptions(imu_factors="twist"),
+    as_read = solve_graph(sim.board, sim.angles, models, GraphOptions.of(imu_factors="twist"),
                          imu=sim.imu.stream)
-    solved = solve_graph(sim.board, sim.angles, models, GraphOptions(imu_position_sigma_m=0.1),
+    solved = solve_graph(sim.board, sim.angles, models, GraphOptions.of(imu_position_sigma_m=0.1),
                          imu=sim.imu.stream)
     d = solved.diagnostics
     found = np.array([d["imu_position_x_m"], d["imu_position_y_m"], d["imu_position_z_m"]])
@@ -314,7 +314,7 @@ def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
     from lhgraph.estimation.problem import build_problem
 
     sim = miscalibrated_imu
-    options = GraphOptions(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
+    options = GraphOptions.of(gyro_scale_sigma=1.0, imu_time_offset_sigma_s=0.02,
                            imu_rotation_sigma_rad=0.1, imu_position_sigma_m=0.1)
     problem = build_problem(sim.board, sim.angles, {}, 0)
     data = inertial_data(sim.imu.stream, problem.state_time)
@@ -347,7 +347,8 @@ def test_imu_calibration_jacobians_match_numerical(miscalibrated_imu):
     for rows, which in ((gyro_rows, 0), (accel_rows, 1)):
         states = np.flatnonzero(data.rate_ok if which == 0 else data.force_ok)
         for i, k in zip(rows[::25], states[::25], strict=False):
-            sigma = options.gyro_sigma_rad_s if which == 0 else ev.twist_imu.terms.accel_sigmas[k]
+            sigma = (options.imu.gyro_sigma_rad_s if which == 0
+                     else ev.twist_imu.terms.accel_sigmas[k])
             A = lin.at(i).getA()[:, -dim:] * sigma  # unwhitened
             num = np.stack([numerical[j][which][k] for j in range(dim)], axis=1)
             np.testing.assert_allclose(A, num, atol=1e-4 * max(1.0, np.abs(num).max()))
@@ -415,12 +416,12 @@ def test_facing_stations_with_a_one_sided_board_join_through_the_imu():
         solve_graph(sim.board, sim.angles, models)
 
     # the twist factors (GTSAM's combined factors, the default: tests/test_combined_imu.py)
-    result = solve_graph(sim.board, sim.angles, models, GraphOptions(imu_factors="twist"),
+    result = solve_graph(sim.board, sim.angles, models, GraphOptions.of(imu_factors="twist"),
                          imu=sim.imu.stream)
     error = station_errors(sim.truth, result.stations)[0]
     assert error.position_norm_m < 5e-3 and np.degrees(error.rotation_rad) < 0.3
     # the preintegrated gyro ties the rotations across the turns no station sees
-    tied = solve_graph(sim.board, sim.angles, models, GraphOptions(gyro_preintegration=True),
+    tied = solve_graph(sim.board, sim.angles, models, GraphOptions.of(gyro_preintegration=True),
                        imu=sim.imu.stream)
     tied_error = station_errors(sim.truth, tied.stations)[0]
     assert tied_error.rotation_rad < 0.5 * error.rotation_rad
@@ -431,7 +432,7 @@ def test_facing_stations_with_a_one_sided_board_join_through_the_imu():
     part = load_simulation_config(FACING).imu.gyro_sigma_rad_s
     learned = tied.diagnostics["preintegration_sigma_rad_s"]
     assert 0.7 * part < learned < 1.5 * part, learned
-    fixed = solve_graph(sim.board, sim.angles, models, GraphOptions(
+    fixed = solve_graph(sim.board, sim.angles, models, GraphOptions.of(
         gyro_preintegration=True, adapt_gyro_sigma=False), imu=sim.imu.stream)
     assert fixed.diagnostics["preintegration_sigma_rad_s"] == 0.02
     rotation_sigma = [np.sqrt(np.trace(r.stations.relative_to_reference().stations[1]
@@ -453,7 +454,7 @@ def test_preintegrated_gyro_jacobians_match_numerical(miscalibrated_imu):
     sim = miscalibrated_imu
     problem = build_problem(sim.board, sim.angles, {}, 0)
     data = inertial_data(sim.imu.stream, problem.state_time)
-    graph, ev = build_graph(problem, GraphOptions(gyro_preintegration=True), inertial=data)
+    graph, ev = build_graph(problem, GraphOptions.of(gyro_preintegration=True), inertial=data)
     init = PnPKabschInitialiser()(sim.board, sim.angles, problem)
     values = initial_values(ev.layout, init, initial_gravity(data, init.X))
     values.update(IMU_BIAS.key(0), np.array([0.02, -0.01, 0.03, 0.0, 0.0, 0.0]))
@@ -528,12 +529,12 @@ def test_reading_noise_and_the_accelerometer_factor_sigma():
     assert gyro_reading_sigma(ImuStream(t, np.zeros_like(noisy), noisy)) == pytest.approx(
         0.1, rel=0.1)  # the noisiest axis
     stream = ImuStream(t, noisy, np.zeros_like(noisy))
-    assert GraphOptions().accel_start_sigma(stream) == pytest.approx(
+    assert GraphOptions().imu.accel_start_sigma(stream) == pytest.approx(
         ACCEL_FACTOR_NOISE_RATIO * 0.1, rel=0.1)
-    assert GraphOptions(adapt_accel_sigma=False).accel_start_sigma(stream) == 0.5
-    assert GraphOptions(accel_sigma_mps2=0.1).accel_start_sigma(stream) == 0.1
+    assert GraphOptions.of(adapt_accel_sigma=False).imu.accel_start_sigma(stream) == 0.5
+    assert GraphOptions.of(accel_sigma_mps2=0.1).imu.accel_start_sigma(stream) == 0.1
     slow = np.sin(2 * np.pi * 0.5 * t)[:, None] * np.ones(3)  # no noise: the floor
-    assert GraphOptions().accel_start_sigma(ImuStream(t, slow, slow)) == 0.02
+    assert GraphOptions().imu.accel_start_sigma(ImuStream(t, slow, slow)) == 0.02
 
 
 def test_long_steps_loosen_their_accelerometer_factor():
@@ -560,7 +561,8 @@ def test_accelerometer_noise_over_its_redundancy(deck_with_imu):
     # there with "stream"; over the factors' redundancy ("auto" on few-diode data) it comes
     # out at the simulated noise; "auto" picks the redundancy on few-diode data and with the
     # IMU calibration solved, the stream's start otherwise
-    from lhgraph.estimation.graph.solver import resolve_estimates, solve_graph
+    from lhgraph.estimation.graph.resolve import DataFacts, resolve_options
+    from lhgraph.estimation.graph.solver import solve_graph
     from lhgraph.sim.imu import ImuConfig
 
     capture, _ = deck_with_imu
@@ -568,14 +570,15 @@ def test_accelerometer_noise_over_its_redundancy(deck_with_imu):
     found = {}
     for estimate in ("stream", "auto"):
         result = solve_graph(capture.board, capture.angles,
-                             options=GraphOptions(accel_sigma_estimate=estimate,
+                             options=GraphOptions.of(accel_sigma_estimate=estimate,
                                                   imu_factors="twist"),
                              imu=imu.stream)
         found[estimate] = result.diagnostics["accel_sigma_mps2"]
     assert found["stream"] == pytest.approx(0.5, rel=0.05)  # + each step's own term
     assert found["auto"] == pytest.approx(0.2, rel=0.25)
-    picks = {(few, calibrated): resolve_estimates(
-        GraphOptions(gyro_scale_sigma=0.1 if calibrated else 0.0), few, True)
-        .accel_sigma_estimate for few in (False, True) for calibrated in (False, True)}
+    picks = {(few, calibrated): resolve_options(
+        GraphOptions.of(gyro_scale_sigma=0.1 if calibrated else 0.0),
+        DataFacts(few, False, 0), inertial=True).options.imu.accel_sigma_estimate
+        for few in (False, True) for calibrated in (False, True)}
     assert picks == {(False, False): "stream", (False, True): "redundancy",
                      (True, False): "redundancy", (True, True): "redundancy"}

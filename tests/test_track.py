@@ -164,7 +164,7 @@ def test_track_honours_isam2(board32, monkeypatch):
     monkeypatch.setattr(batch, "isam2_batch",
                         lambda *args, **kw: calls.append(1) or isam2_batch(*args, **kw))
     isam = track(board32.board, board32.angles, board32.truth,
-                 options=GraphOptions(solver="isam2"))
+                 options=GraphOptions.of(solver="isam2"))
     gap = np.linalg.norm(isam.path.trajectory.T_world_board[:, :3, 3]
                          - lm.path.trajectory.T_world_board[:, :3, 3], axis=1)
     assert calls and np.median(gap) < 2e-4
@@ -177,5 +177,5 @@ def test_track_honours_isam2(board32, monkeypatch):
 def test_streaming_refuses_what_it_cannot_honour(board32, name, value):
     with pytest.raises(InputError, match=name):
         list(track_stream(board32.board, board32.angles, board32.truth,
-                          options=GraphOptions(**{name: value})))
+                          options=GraphOptions.of(**{name: value})))
 

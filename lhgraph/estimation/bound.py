@@ -14,7 +14,7 @@ it against the Monte-Carlo spread of the estimate.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import gtsam
 import numpy as np
@@ -76,7 +76,7 @@ def information_bound(problem: GraphProblem, truth: Initialisation, options: Gra
     and body twists at the state times) with ``options``' noise levels (``angle_sigma_rad``,
     ``sweep_offset_sigma_rad``, the motion PSDs); ``true_motion_prior``: the PSDs scaled to
     the true motion first; ``known_path``: the board's poses and twists held at the truth."""
-    options = replace(options, loss="huber", huber_k=GAUSSIAN_HUBER_K)
+    options = options.with_values(loss="huber", huber_k=GAUSSIAN_HUBER_K)
     graph, ev = build_graph(problem, options)
     values = initial_values(ev.layout, truth)
     ev.evaluate(values)

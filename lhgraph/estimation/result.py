@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -59,6 +60,11 @@ class SolveResult:
     diode_bias_rad: dict[int, NDArray[np.float64]] | None = None
     """With the graph's diode biases (``diode_bias_sigma_rad``): per station index, the
     ``(2, n_sensors)`` angle bias (rad) of each axis and board row."""
+    options: dict[str, dict[str, Any]] | None = None
+    """The options the solve ran with, every choice resolved, by group (the graph's
+    :func:`~lhgraph.estimation.graph.resolve.resolve_options`; None for other methods)."""
+    option_rules: list[str] = field(default_factory=list)
+    """One line per rule that changed the options given (the graph's)."""
     sensor_offset_m: NDArray[np.float64] | None = None
     """With the graph's sensor offsets (``sensor_offset_sigma_m``): the correction ``(n_sensors,
     3)`` (m, board frame) of every sensor position of the board file, by board row."""

@@ -173,9 +173,10 @@ def _json_safe(value: Any) -> Any:
 
 
 def method_options(config: SolveConfig, method: str) -> dict[str, Any]:
-    """The solver options a method ran with."""
+    """The solver options a method was given (the graph's flat, as in the config; what they
+    resolved to is the summary's ``resolved_options``)."""
     if method == "graph":
-        options = asdict(config.graph)
+        options = config.graph.flat()
         if config.reference is not None:
             options["reference"] = config.reference
         return options
@@ -199,6 +200,8 @@ def summarise(config: SolveConfig, inputs: SolveInputs, result: SolveResult,
         "inputs": hashes,
         "seed": config.seed,
         "options": method_options(config, result.method),
+        "resolved_options": result.options,
+        "option_rules": result.option_rules,
         "hits": len(inputs.angles),
         "stations": station_summary(result.stations),
         "reference": result.stations.reference,
@@ -304,7 +307,7 @@ def run_to_directory(config: SolveConfig, output: str | Path, overwrite: bool = 
                          config.path, "board_output")
     methods = config.method_list()
     check_inputs(config)
-    for target in planned_files(output, methods, config.graph.sensor_offset_sigma_m > 0):
+    for target in planned_files(output, methods, config.graph.board.sensor_offset_sigma_m > 0):
         if target.exists() and not target.is_dir() and not (overwrite or resume):
             raise InputError("exists already (--resume keeps the methods that finished and "
                              "computes the rest; --force recomputes everything)", target)

@@ -57,13 +57,13 @@ def solve(board: Board, angles: Angles, method: str = "graph",
     by the receiver's IMU when the solve has one (``imu``; then ``world_up`` may be empty,
     and where it is not, ``diagnostics["imu_ootx_up_deg"]`` is the angle between the two
     ups), else by the stations' OOTX vectors.
-    ``reference`` overrides ``graph_options.reference`` (the caller's options are not changed).
+    ``reference`` overrides ``graph_options.data.reference`` (the caller's options are not changed).
     """
     angles.check_board(board)
     if method == "graph":
         options = graph_options or GraphOptions()
         if reference is not None:
-            options = dataclasses.replace(options, reference=reference)
+            options = options.with_values(reference=reference)
         result = solve_graph(board, angles, models, options, progress, imu=imu)
     elif method == "paper":
         if imu is not None:

@@ -7,7 +7,7 @@ replace fields with :func:`lhgraph.config.override`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from lhgraph.choices import METHODS, WORLDS
@@ -63,9 +63,9 @@ class SolveConfig:
         """The graph's options: ``graph``, with the sensor offsets on
         (``SENSOR_OFFSET_SIGMA_M``) when a ``board_output`` is asked for and ``graph`` does not
         set their prior."""
-        if self.board_output is None or self.graph.sensor_offset_sigma_m > 0:
+        if self.board_output is None or self.graph.board.sensor_offset_sigma_m > 0:
             return self.graph
-        return replace(self.graph, sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M)
+        return self.graph.with_values(sensor_offset_sigma_m=SENSOR_OFFSET_SIGMA_M)
 
     def method_list(self) -> list[str]:
         """The methods to run, in order."""

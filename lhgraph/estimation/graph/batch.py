@@ -5,7 +5,7 @@
 1. build the graph of every factor family the options ask for (:func:`~.factors.build_graph`);
 2. its initial values from an initialisation (and the gravity, with IMU factors);
 3. the noise levels started where a previous stage left them (``levels``);
-4. optimise: ``options.solver`` ``"lm"`` (:func:`~.optimizer.levenberg_marquardt` with the
+4. optimise: ``options.optimizer.solver`` ``"lm"`` (:func:`~.optimizer.levenberg_marquardt` with the
    variance-component adaptation of :mod:`.noise`, and a ``watch`` after every accepted
    step) or ``"isam2"`` (:func:`~.optimizer.isam2_batch`, no noise adaptation);
 5. the marginals the caller asks for, at the result (the stations' for the calibration,
@@ -71,7 +71,7 @@ def build_and_optimise(problem: GraphProblem, options: GraphOptions, init: Initi
         ev.bearing.scale_noise((levels.bearing.angle_sigma() / ev.bearing.angle_sigma()) ** 2)
         ev.motion.scale(levels.motion.psd_factor() / ev.motion.psd_factor())
     try:
-        if options.solver == "lm":
+        if options.optimizer.solver == "lm":
             hook = (NoiseAdaptation(graph, ev, options, progress)
                     if NoiseAdaptation.enabled(options) else None)
             if watch is not None:
@@ -79,7 +79,7 @@ def build_and_optimise(problem: GraphProblem, options: GraphOptions, init: Initi
             fit = levenberg_marquardt(graph, values, ev.cost, ev.layout,
                                       LMParams.from_options(options), hook, progress)
         else:
-            fit = isam2_batch(graph, values, ev.layout, options.max_iterations, progress)
+            fit = isam2_batch(graph, values, ev.layout, options.optimizer.max_iterations, progress)
         found = marginals(fit, ev)
     except RuntimeError as err:  # gtsam's IndeterminateLinearSystemException and kin
         raise SolverError(undetermined(str(err), ev.layout, problem)) from err

@@ -51,24 +51,24 @@ def graph_layout(problem: GraphProblem, options: GraphOptions, tracking: bool,
     return VariableLayout.of_problem(
         problem.n_states, len(problem.station_ids), fixed_stations=tracking,
         inertial=inertial,
-        diode_bias=diode_bias_family(n) if options.diode_bias_sigma_rad > 0 else None,
-        sensor_offset=sensor_offset_family(n) if options.sensor_offset_sigma_m > 0 else None,
-        imu_calibration=options.imu_calibrated,
-        combined_imu=inertial and options.imu_factor_kind == "combined")
+        diode_bias=diode_bias_family(n) if options.board.diode_bias_sigma_rad > 0 else None,
+        sensor_offset=sensor_offset_family(n) if options.board.sensor_offset_sigma_m > 0 else None,
+        imu_calibration=options.imu.calibrated,
+        combined_imu=inertial and options.imu.factor_kind == "combined")
 
 
 def factor_families(problem: GraphProblem, layout: VariableLayout, options: GraphOptions,
                     inertial: InertialData | None = None) -> list[FactorFamily]:
     """The registry: the factor families of ``problem``'s graph under ``options`` (with
     ``inertial`` the IMU's), in graph order."""
-    corrections = BoardCorrections(problem, layout, options.diode_bias_sigma_rad,
-                                   options.sensor_offset_sigma_m)
+    corrections = BoardCorrections(problem, layout, options.board.diode_bias_sigma_rad,
+                                   options.board.sensor_offset_sigma_m)
     families: list[FactorFamily] = [
-        Bearings(problem, layout, RobustLoss(options.loss, options.huber_k),
-                 options.angle_sigma_rad, options.sweep_offset_sigma_rad, corrections),
+        Bearings(problem, layout, RobustLoss(options.robust.loss, options.robust.huber_k),
+                 options.noise.angle_sigma_rad, options.noise.sweep_offset_sigma_rad, corrections),
         corrections,
-        MotionPrior(problem, (options.accel_psd_rot, options.accel_psd_pos))]
-    if inertial is not None and options.imu_factor_kind == "combined":
+        MotionPrior(problem, (options.motion.accel_psd_rot, options.motion.accel_psd_pos))]
+    if inertial is not None and options.imu.factor_kind == "combined":
         families.append(CombinedImuFamily(inertial.stream, problem.state_time, layout,
                                           options))
     elif inertial is not None:

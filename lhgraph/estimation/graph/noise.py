@@ -85,15 +85,15 @@ class NoiseAdaptation:
         self.options = options
         self.progress = progress
         self.graph = graph
-        self.rounds_left = options.motion_prior_rounds
+        self.rounds_left = options.motion.motion_prior_rounds
         self._redundancy: dict[str, tuple[int, float]] | None = None  # at the current levels
         self._keys: gtsam.VectorValues | None = None  # a vector per variable (the graph's)
 
     @staticmethod
     def enabled(options: GraphOptions) -> bool:
         """Whether ``options`` adapt any noise level."""
-        return (options.adapt_motion_prior or options.adapt_angle_sigma
-                or options.adapt_gyro_sigma or options.accel_sigma_estimate == "redundancy")
+        return (options.motion.adapt_motion_prior or options.noise.adapt_angle_sigma
+                or options.imu.adapt_gyro_sigma or options.imu.accel_sigma_estimate == "redundancy")
 
     def __call__(self, values: gtsam.Values,
                  linearized: Callable[[], gtsam.GaussianFactorGraph] | None = None) -> bool:
@@ -113,7 +113,7 @@ class NoiseAdaptation:
         changed (False: both levels match the data or sit at their bounds)."""
         ev, options = self.evaluator, self.options
         chi2 = ev.motion.chi2_per_dof()
-        redundant = options.motion_prior_estimate == "redundancy"
+        redundant = options.motion.motion_prior_estimate == "redundancy"
         groups = self._redundancy_groups()
         if groups and self._redundancy is None:
             self._redundancy = self._redundancies(linearized(), groups)
@@ -121,21 +121,21 @@ class NoiseAdaptation:
             rows, dof = self._redundancy["motion"]
             chi2 *= rows / max(dof, 1.0)
         ratio = float(np.clip(chi2, 1e-3, 1e3))
-        if not options.adapt_motion_prior:
+        if not options.motion.adapt_motion_prior:
             ratio = 1.0
         # a model misfit shows up as board jitter: never loosen the prior beyond the cap
-        ratio = min(ratio, options.max_psd_factor / ev.motion.psd_factor())
+        ratio = min(ratio, options.motion.max_psd_factor / ev.motion.psd_factor())
         if not redundant:
             # nor stiffen it below the floor: a real board's motion is not exactly WNOA, and
             # an over-stiff prior trades the station's accuracy for smoothness
-            ratio = max(ratio, options.min_psd_factor / ev.motion.psd_factor())
+            ratio = max(ratio, options.motion.min_psd_factor / ev.motion.psd_factor())
         # the diodes' noise from the residuals (robust: MAD), never below the configured
         # sigma (the 2 MHz quantisation) nor above max_sigma_factor times it
         sigma_hat = robust_sigma(ev.bearing.residuals(), about_zero=True)
         noise = 1.0
-        if options.adapt_angle_sigma:
-            noise = float(np.clip(sigma_hat, options.angle_sigma_rad,
-                                  options.max_sigma_factor * options.angle_sigma_rad)
+        if options.noise.adapt_angle_sigma:
+            noise = float(np.clip(sigma_hat, options.noise.angle_sigma_rad,
+                                  options.noise.max_sigma_factor * options.noise.angle_sigma_rad)
                           / ev.bearing.angle_sigma())**2
         twist = ev.twist_imu
         imu = None if twist is None else twist.preintegrated()
@@ -164,11 +164,11 @@ class NoiseAdaptation:
         """The variance factor of ``imu``'s preintegrated gyro factors: their chi2 per degree
         of freedom, within [the stream's reading noise, ``gyro_sigma_rad_s``] (1 without
         ``adapt_gyro_sigma``)."""
-        if not self.options.adapt_gyro_sigma:
+        if not self.options.imu.adapt_gyro_sigma:
             return 1.0
         now = imu.preintegration_sigma()
         return float(np.clip(imu.preintegration_chi2_per_dof(), (imu.reading_sigma / now) ** 2,
-                             (self.options.gyro_sigma_rad_s / now) ** 2))
+                             (self.options.imu.gyro_sigma_rad_s / now) ** 2))
 
     def _accel_ratio(self) -> float:
         """The variance factor of the accelerometer factors: their whitened chi2 over their
@@ -187,9 +187,10 @@ class NoiseAdaptation:
         (``accel_sigma_estimate = "redundancy"``, with IMU factors)."""
         ev, options = self.evaluator, self.options
         groups = {}
-        if options.motion_prior_estimate == "redundancy" and options.adapt_motion_prior:
+        motion = options.motion
+        if motion.motion_prior_estimate == "redundancy" and motion.adapt_motion_prior:
             groups["motion"] = ev.motion.indices
-        if (options.accel_sigma_estimate == "redundancy" and ev.twist_imu is not None
+        if (options.imu.accel_sigma_estimate == "redundancy" and ev.twist_imu is not None
                 and len(ev.twist_imu.accel)):
             groups["accel"] = ev.twist_imu.accel
         return groups

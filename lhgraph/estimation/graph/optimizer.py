@@ -43,7 +43,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.estimation.graph.options import STEP_TOLERANCE_SIGMA, GraphOptions
+from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import BOARD_POSE, VariableLayout
 
 Array = NDArray[np.float64]
@@ -69,7 +69,7 @@ class Status(StrEnum):
 @dataclass(frozen=True)
 class LMParams:
     """Iteration limit and the stopping rule's tolerances (see the module docstring); made
-    from the user's :class:`GraphOptions`, which hold the defaults."""
+    from resolved :class:`GraphOptions`."""
 
     max_iterations: int
     relative_tolerance: float
@@ -82,12 +82,14 @@ class LMParams:
 
     @classmethod
     def from_options(cls, options: GraphOptions) -> LMParams:
-        step = options.step_tolerance_sigma
-        return cls(options.max_iterations, options.relative_tolerance,
-                   STEP_TOLERANCE_SIGMA if step is None else step,
-                   options.board_step_tolerance_rad,
-                   options.board_step_tolerance_m, options.board_step_quantile or 1.0,
-                   options.max_board_step_rad, options.max_board_step_m)
+        """The optimizer group of resolved options
+        (:func:`~lhgraph.estimation.graph.resolve.resolve_options`: no tolerance unset)."""
+        o = options.optimizer
+        if o.step_tolerance_sigma is None or o.board_step_quantile is None:
+            raise ValueError("the stopping rule needs resolved options (resolve_options)")
+        return cls(o.max_iterations, o.relative_tolerance, o.step_tolerance_sigma,
+                   o.board_step_tolerance_rad, o.board_step_tolerance_m, o.board_step_quantile,
+                   o.max_board_step_rad, o.max_board_step_m)
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import gtsam
 import numpy as np
@@ -169,7 +169,7 @@ class StreamingSolver:
             self.models = {s: stations.stations[s].model for s in self.station_ids} | self.models
         self.options = options or GraphOptions()
         unsupported = [name for name in STREAMING_UNSUPPORTED
-                       if getattr(self.options, name) != getattr(GraphOptions(), name)]
+                       if self.options.flat()[name] != GraphOptions().flat()[name]]
         if unsupported:
             raise InputError(f"the streaming smoother has no {unsupported[0]} (its "
                              "incremental graph holds bearings, sweep offsets and the motion "
@@ -181,11 +181,12 @@ class StreamingSolver:
         self._smoother: gtsam.IncrementalFixedLagSmoother | None = None
         self._k = 0  # next state index
         self._last: tuple[float, Array, Array] | None = None  # time, pose, twist of last state
-        self._psd = (self.options.accel_psd_rot, self.options.accel_psd_pos)
-        self._sigma = self.options.angle_sigma_rad  # the warm-up solve's learned value later
-        self._estimator = RobustLoss(self.options.loss, self.options.huber_k).estimator()
+        self._psd = (self.options.motion.accel_psd_rot, self.options.motion.accel_psd_pos)
+        self._sigma = self.options.noise.angle_sigma_rad  # the warm-up's learned value later
+        robust = self.options.robust
+        self._estimator = RobustLoss(robust.loss, robust.huber_k).estimator()
         self._offset_noise = gtsam.noiseModel.Isotropic.Sigma(
-            1, self.options.sweep_offset_sigma_rad)
+            1, self.options.noise.sweep_offset_sigma_rad)
 
     def add(self, chunk: Angles) -> StreamingEstimate | None:
         """Add the hits of one or more complete sync cycles; returns the current estimate
@@ -223,20 +224,20 @@ class StreamingSolver:
         """The warm-up batch and the smoother's start; tracking: the warm-up's path."""
         if self.stations is None:
             batch = solve_graph(self.board, data, self.models,
-                                replace(self.options, reference=self.station_ids[0]))
+                                self.options.with_values(reference=self.station_ids[0]))
             path = None
         else:
             # one state per sweep, as the smoother adds them (no rotor-grid cycles)
             batch = track(self.board, data, self.stations, self.models,
-                          replace(self.options, sweep_times="stamped"))
+                          self.options.with_values(sweep_times="stamped"))
             path = batch.path
         self._psd = (batch.diagnostics.get("accel_psd_rot", self._psd[0]),
                      batch.diagnostics.get("accel_psd_pos", self._psd[1]))
         if path is not None:
             # a filter predicts: never stiffer than the configured start, which the warm-up's
             # smoothing adaptation may undercut (on a fast hand-held deck: twice the error)
-            self._psd = (max(self._psd[0], self.options.accel_psd_rot),
-                         max(self._psd[1], self.options.accel_psd_pos))
+            self._psd = (max(self._psd[0], self.options.motion.accel_psd_rot),
+                         max(self._psd[1], self.options.motion.accel_psd_pos))
         self._sigma = batch.diagnostics.get("angle_sigma_rad", self._sigma)
         self._smoother = gtsam.IncrementalFixedLagSmoother(self.lag_s, _isam2_params())
         graph = gtsam.NonlinearFactorGraph()

@@ -22,6 +22,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,8 +31,9 @@ from lhgraph.errors import InputError, SolverError
 from lhgraph.estimation.graph.batch import build_and_optimise
 from lhgraph.estimation.graph.evaluator import FactorEvaluator
 from lhgraph.estimation.graph.optimizer import OptimizerResult
-from lhgraph.estimation.graph.options import FEW_DIODE_TRACKING, GraphOptions
-from lhgraph.estimation.graph.solver import graph_preparation, resolve_estimates
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.resolve import prepare, resolve_options
+from lhgraph.estimation.graph.solver import say_resolution
 from lhgraph.estimation.graph.variables import BOARD_POSE
 from lhgraph.estimation.imu.inertial import inertial_data, start_with_imu
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
@@ -114,6 +116,10 @@ class TrackResult:
     diagnostics: dict[str, float] = field(default_factory=dict)
     imu_bias: Array | None = None
     gravity: Array | None = None
+    options: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """The options the track ran with, every choice resolved, by group."""
+    option_rules: list[str] = field(default_factory=list)
+    """One line per rule that changed the options given."""
 
 
 def station_slot_poses(stations: Stations, station_ids: list[int]) -> Array:
@@ -240,11 +246,12 @@ def track(board: Board, angles: Angles, stations: Stations,
     angular rates are the gyro's, and the IMU bias and the world's gravity are estimated."""
     options = options or GraphOptions()
     t0 = time.perf_counter()
-    angles, options, few = graph_preparation(
-        angles, options, progress, models or {k: stations.stations[k].model
-                                              for k in stations.indices()},
-        FEW_DIODE_TRACKING)
-    options = resolve_estimates(options, few, imu is not None)
+    angles, facts = prepare(angles, options, models or {k: stations.stations[k].model
+                                                        for k in stations.indices()},
+                            progress)
+    resolution = resolve_options(options, facts, inertial=imu is not None, tracking=True)
+    say_resolution(resolution, progress)
+    options, few = resolution.options, facts.few_diode
     problem, T_world_lh = tracking_problem(board, angles, stations, models)
     if few:
         init = FewDiodeInitialiser(cross_max_gap_s=TRACK_CROSS_GAP_S).with_stations(
@@ -254,11 +261,11 @@ def track(board: Board, angles: Angles, stations: Stations,
         init, n_pnp = initial_path(board, angles, problem, T_world_lh, pose_solver)
     inertial = gravity = None
     if imu is not None:
-        if options.imu_calibration_from_light:
+        if options.imu.calibration_from_light:
             raise InputError("the tracker finds no IMU calibration for GTSAM's combined IMU "
                              "factors (the calibration finds it from a light-only solution): "
                              "use imu_factors = 'twist' or 'auto'", where="imu_factors")
-        inertial = inertial_data(imu, problem.state_time, options.imu_max_gap_s)
+        inertial = inertial_data(imu, problem.state_time, options.imu.imu_max_gap_s)
         init, gravity = start_with_imu(init, inertial)
     timings = {"initialise": time.perf_counter() - t0}
     if progress:
@@ -279,4 +286,6 @@ def track(board: Board, angles: Angles, stations: Stations,
         diagnostics=ev.summary(),
         imu_bias=ev.imu_bias(),
         gravity=ev.gravity(),
+        options=options.nested(),
+        option_rules=list(resolution.applied),
     )

@@ -88,18 +88,18 @@ class Preintegration:
 def noise_params(stream: ImuStream, options: GraphOptions) -> gtsam.PreintegrationCombinedParams:
     """GTSAM's preintegration parameters for ``stream``: the readings' white-noise densities
     (rad/s and m/s^2 per root hertz) from the stream's own noise times
-    ``options.imu_noise_factor``, the bias walks of ``options``; gravity is a variable of
+    ``options.imu.imu_noise_factor``, the bias walks of ``options``; gravity is a variable of
     the factors, not of these parameters."""
     period = float(np.median(np.diff(stream.time)))
-    gyro = max(gyro_reading_sigma(stream), options.min_gyro_sigma_rad_s)
-    accel = max(float(np.max(reading_noise(stream.accel_mps2))), options.min_accel_sigma_mps2)
+    gyro = max(gyro_reading_sigma(stream), options.imu.min_gyro_sigma_rad_s)
+    accel = max(float(np.max(reading_noise(stream.accel_mps2))), options.imu.min_accel_sigma_mps2)
     p = gtsam.PreintegrationCombinedParams.MakeSharedU(STANDARD_GRAVITY_MPS2)
-    scale2 = options.imu_noise_factor**2 * period
+    scale2 = options.imu.imu_noise_factor**2 * period
     p.setGyroscopeCovariance(np.eye(3) * gyro**2 * scale2)
     p.setAccelerometerCovariance(np.eye(3) * accel**2 * scale2)
     p.setIntegrationCovariance(np.eye(3) * INTEGRATION_SIGMA**2)
-    p.setBiasOmegaCovariance(np.eye(3) * options.gyro_bias_walk**2)
-    p.setBiasAccCovariance(np.eye(3) * options.accel_bias_walk**2)
+    p.setBiasOmegaCovariance(np.eye(3) * options.imu.gyro_bias_walk**2)
+    p.setBiasAccCovariance(np.eye(3) * options.imu.accel_bias_walk**2)
     return p
 
 
@@ -114,14 +114,14 @@ def preintegrate(stream: ImuStream, state_time: Array, options: GraphOptions) ->
     ~1 rad/s read at 100 Hz otherwise gets a systematic error of ~0.05 m/s^2 that scaled
     the simulated decks' stations by -0.1 %). A step
     is covered when it has positive length, lies within the stream, and no two samples
-    around it are more than ``options.imu_max_gap_s`` apart."""
+    around it are more than ``options.imu.imu_max_gap_s`` apart."""
     t = stream.time
     edges = 0.5 * (t[1:] + t[:-1])  # sample i holds from edges[i - 1] to edges[i]
     t0, t1 = state_time[:-1], state_time[1:]
     first = np.searchsorted(t, t0, side="right") - 1  # the last sample at or before t0
     last = np.searchsorted(t, t1, side="left")  # the first sample at or after t1
     inside = (t1 > t0) & (t0 >= t[0]) & (t1 <= t[-1])
-    too_long = np.r_[0, np.cumsum(np.diff(t) > options.imu_max_gap_s)]
+    too_long = np.r_[0, np.cumsum(np.diff(t) > options.imu.imu_max_gap_s)]
     covered = inside & (too_long[np.clip(last, 0, len(t) - 1)]
                         == too_long[np.clip(first, 0, len(t) - 1)])
     # every piece between consecutive state times and sample edges, its step and its sample
@@ -176,7 +176,7 @@ def combined_imu_factors(pre: Preintegration, state_time: Array, options: GraphO
     for k, pim in zip(pre.steps.tolist(), pre.measurements, strict=True):
         graph.add(gtsam.CombinedImuFactorWithGravityVector(
             x(k), v(k), x(k + 1), v(k + 1), b(k), b(k + 1), GRAVITY.key(0), pim))
-    walk = np.r_[[options.accel_bias_walk] * 3, [options.gyro_bias_walk] * 3]
+    walk = np.r_[[options.imu.accel_bias_walk] * 3, [options.imu.gyro_bias_walk] * 3]
     n_states = len(state_time)
     period = float(np.median(np.diff(state_time))) if n_states > 1 else 1.0
     zero = gtsam.imuBias.ConstantBias()
@@ -208,7 +208,7 @@ class CombinedImu:
                 f"the IMU stream covers no step between board states (its samples "
                 f"{stream.time[0]:.3f}-{stream.time[-1]:.3f} s, longest gap "
                 f"{np.max(np.diff(stream.time), initial=0.0) * 1e3:.0f} ms against "
-                f"imu_max_gap_s = {options.imu_max_gap_s * 1e3:.0f} ms)", "imu")
+                f"imu_max_gap_s = {options.imu.imu_max_gap_s * 1e3:.0f} ms)", "imu")
         self.graph = combined_imu_factors(self.preintegration, state_time, options)
         self.layout = layout
 

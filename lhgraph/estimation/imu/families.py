@@ -74,8 +74,8 @@ class TwistImu(FactorFamily):
     def __init__(self, inertial: InertialData, layout: VariableLayout, options: GraphOptions):
         self.terms = ImuTerms(inertial, layout, options)
         self.data = inertial
-        self.calibrated = options.imu_calibrated
-        self._gyro_sigma = options.gyro_sigma_rad_s
+        self.calibrated = options.imu.calibrated
+        self._gyro_sigma = options.imu.gyro_sigma_rad_s
         self.accel = range(0)
         self._ready = False
 

@@ -60,25 +60,25 @@ class ImuTerms:
 
     def __init__(self, data: InertialData, layout: VariableLayout, options: GraphOptions):
         self.data = data
-        self.gyro_sigma = options.gyro_sigma_rad_s
-        self.accel_sigmas = data.accel_sigmas(options.accel_start_sigma(data.stream))
+        self.gyro_sigma = options.imu.gyro_sigma_rad_s
+        self.accel_sigmas = data.accel_sigmas(options.imu.accel_start_sigma(data.stream))
         """Each step's accelerometer-factor noise (m/s^2, :meth:`InertialData.accel_sigmas`) in
         the graph's noise models; the factors see it times :meth:`accel_sigma_factor`."""
-        self.accel_bounds = (options.min_accel_sigma_mps2, options.accel_sigma_mps2)
+        self.accel_bounds = (options.imu.min_accel_sigma_mps2, options.imu.accel_sigma_mps2)
         """The range (m/s^2) a rescaling may move the factors' median noise within."""
         self._accel_scale = 1.0  # 1/sqrt(f): the accelerometer factors' variance is f times
         self.calibration = layout.family(IMU_CALIBRATION.name)
         self.calibration_sigmas = np.array(
-            [options.gyro_scale_sigma or FIXED_CALIBRATION_SIGMA] * 3
-            + [options.imu_time_offset_sigma_s or FIXED_CALIBRATION_SIGMA]
-            + [options.imu_rotation_sigma_rad or FIXED_CALIBRATION_SIGMA] * 3
-            + [options.imu_position_sigma_m or FIXED_CALIBRATION_SIGMA] * 3)
+            [options.imu.gyro_scale_sigma or FIXED_CALIBRATION_SIGMA] * 3
+            + [options.imu.imu_time_offset_sigma_s or FIXED_CALIBRATION_SIGMA]
+            + [options.imu.imu_rotation_sigma_rad or FIXED_CALIBRATION_SIGMA] * 3
+            + [options.imu.imu_position_sigma_m or FIXED_CALIBRATION_SIGMA] * 3)
         """Prior spread of the calibration's components (an unasked one is held at 0)."""
         self.imu = np.zeros(9)  # IMU bias (gyro, accelerometer), gravity
         self.C = np.zeros(IMU_CALIBRATION.dim)
         """Gyro scale error (3), time offset (s), IMU rotation (3, rad), IMU position (3, m)."""
         self._R = np.eye(3)  # IMU frame to board frame, Exp(C[4:7])
-        self.preintegrated = (np.zeros(0, dtype=np.int64) if not options.gyro_preintegration
+        self.preintegrated = (np.zeros(0, dtype=np.int64) if not options.imu.gyro_preintegration
                               else np.flatnonzero(data.rate_ok[:-1] & data.rate_ok[1:]
                                                   & (data.dt > 0)))
         """Steps k (k -> k + 1) with a preintegrated gyro factor."""
@@ -86,14 +86,14 @@ class ImuTerms:
         """Noise (rad) of each preintegrated gyro factor (its noise model's: at
         ``gyro_sigma_rad_s``)."""
         self._pre_scale = 1.0  # 1/sqrt(f): the preintegrated factors' variance is f times theirs
-        self.reading_sigma = options.gyro_sigma_rad_s
+        self.reading_sigma = options.imu.gyro_sigma_rad_s
         """The lowest reading noise the preintegrated factors may be rescaled to (rad/s): the
         stream's own within [``min_gyro_sigma_rad_s``, ``gyro_sigma_rad_s``]."""
         if len(self.preintegrated):
-            self._substeps(options.gyro_sigma_rad_s)
+            self._substeps(options.imu.gyro_sigma_rad_s)
             self.reading_sigma = float(np.clip(gyro_reading_sigma(data.stream),
-                                               options.min_gyro_sigma_rad_s,
-                                               options.gyro_sigma_rad_s))
+                                               options.imu.min_gyro_sigma_rad_s,
+                                               options.imu.gyro_sigma_rad_s))
 
     def scale_preintegration_noise(self, factor: float) -> None:
         """Multiply the preintegrated gyro factors' variance by ``factor`` (their residuals
