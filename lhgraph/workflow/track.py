@@ -26,7 +26,7 @@ from lhgraph.io.imu import load_imu
 from lhgraph.io.stations import load_stations
 from lhgraph.io.trajectory import save_trajectory
 from lhgraph.model.boards import board_by_name
-from lhgraph.workflow.inputs import station_models
+from lhgraph.workflow.inputs import check_generations, station_models
 
 Progress = Callable[[str], None]
 
@@ -83,6 +83,8 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
         raise InputError(f"no [lighthouses.<index>] table for station(s) "
                          f"{', '.join(map(str, missing))} seen in {angles}", stations)
     models = station_models(calibration)
+    if calibration is not None:
+        check_generations(models, the_angles, calibration, angles)
     stream = None if imu is None else load_imu(imu)
     if streaming:
         estimates = list(track_stream(the_board, the_angles, fixed, models, options,
