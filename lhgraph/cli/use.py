@@ -34,14 +34,10 @@ def add_track(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run_track(args: argparse.Namespace) -> int:
-    from lhgraph.workflow.inputs import calibration_beside
     from lhgraph.workflow.track import track_files
 
     progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
-    calibration, note = calibration_beside(args.angles, args.calibration)
-    if note and not args.quiet:
-        print(f"lhgraph track: {note}", file=sys.stderr)
-    out = track_files(args.board, args.angles, args.stations, args.output, calibration,
+    out = track_files(args.board, args.angles, args.stations, args.output, args.calibration,
                       args.streaming, args.force, progress=progress, delay_s=args.delay,
                       imu=args.imu)
     if not args.quiet:
