@@ -66,7 +66,7 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
     state as estimated ``delay_s`` after it (default
     :data:`~lhgraph.estimation.graph.streaming.DELAY_S`); ``imu``: the receiver's
     ``imu.csv`` (board frame, the angles' clock) for the graph's IMU factors (batch only)."""
-    check_writable(output, overwrite)
+    check_writable(output, overwrite, create_parents=False)  # the folder: when writing
     if imu is not None and streaming:
         raise InputError("IMU factors are batch only: drop --streaming or --imu", "--imu")
     if delay_s is not None and not streaming:
