@@ -50,7 +50,9 @@ def test_cli_solves_an_lh2_capture(tmp_path, capsys):
     assert ours.stations[1].model.generation == 2
     err = station_errors(cap.truth, ours)[0]
     assert err.position_norm_m < 1e-3 and np.degrees(err.rotation_rad) < 0.02
-    # read as LH1 (no ootx.toml), the same angles give no sensible answer
+    # read as LH1 (no ootx.toml, not even beside the angles), the same angles give no
+    # sensible answer
+    paths["ootx"].rename(tmp_path / "elsewhere.toml")
     assert main(["solve", "--board", str(paths["board"]), "--angles", str(paths["angles"]),
                  "--output", str(tmp_path / "lh1.toml"), "--quiet"]) in (0, 3)
     if (tmp_path / "lh1.toml").exists():

@@ -2,7 +2,10 @@
 commands (:mod:`~lhgraph.cli.calibrate`, :mod:`~lhgraph.cli.signal`,
 :mod:`~lhgraph.cli.interop`, :mod:`~lhgraph.cli.use`), each registering its commands in
 :data:`~lhgraph.cli.common.COMMANDS`. Errors derived from :class:`LhgraphError` become one
-line on stderr and their exit code (2 for bad input); nothing else is caught.
+line on stderr and their exit code (2 for bad input); nothing else is caught. Every parser
+is a :class:`~lhgraph.cli.common.Parser` (single values given once, defaults in the help);
+while a command runs, its input files (:func:`~lhgraph.cli.common.mark_inputs`) are guarded
+against being written over and each output folder it creates is announced.
 """
 
 from __future__ import annotations
@@ -12,7 +15,7 @@ import sys
 from collections.abc import Sequence
 
 from lhgraph.cli import calibrate, interop, signal, use  # noqa: F401  (they register)
-from lhgraph.cli.common import COMMANDS
+from lhgraph.cli.common import COMMANDS, Parser
 from lhgraph.errors import LhgraphError
 
 
@@ -41,9 +44,10 @@ def version() -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``lhgraph`` argument parser with every registered command."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="lhgraph",
-        description="Calibrate Lighthouse v1 base-station poses from a photodiode-board capture.",
+        description="Calibrate Lighthouse base-station poses (LH1 or LH2) from a receiver's "
+        "capture.",
     )
     parser.add_argument("--version", action=_Version, help="print the version and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -57,8 +61,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``lhgraph`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    from lhgraph.io.files import guard_inputs
+
+    def created(folder: object) -> None:
+        if not getattr(args, "quiet", False):
+            print(f"lhgraph {args.command}: created output folder {folder}", file=sys.stderr)
+
+    inputs = [getattr(args, dest, None) for dest in getattr(args, "_inputs", ())]
     try:
-        return int(args._run(args) or 0)
+        with guard_inputs(inputs, created):
+            return int(args._run(args) or 0)
     except LhgraphError as exc:
         print(f"lhgraph {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -10,6 +10,7 @@ from lhgraph.cli.common import (
     add_common_output,
     add_verbose,
     at_least,
+    mark_inputs,
     progress_printer,
 )
 
@@ -27,6 +28,7 @@ def add_simulate(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--capture", action="store_true",
                    help="also write the raw signal a board would record (capture.lhcap)")
     add_common_output(p)
+    mark_inputs(p, "config")
     return p
 
 
@@ -72,7 +74,8 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    "the board with them (docs/solve.md)")
     p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
     p.add_argument("--truth", help="true stations TOML: print the errors")
-    p.add_argument("--reference", type=int, help="station index of the world frame")
+    p.add_argument("--reference", type=int,
+                   help="station index of the world frame (default: the lowest index seen)")
     p.add_argument("--duration", type=float, metavar="S",
                    help="solve only the first S seconds in which the board moves")
     p.add_argument("--world", choices=WORLDS,
@@ -85,6 +88,7 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    "inputs and options, compute the rest")
     add_common_output(p)
     add_verbose(p)
+    mark_inputs(p, "config", "board", "angles", "calibration", "truth", "imu")
     return p
 
 
@@ -95,6 +99,7 @@ def run_solve(args: argparse.Namespace) -> int:
     from lhgraph.config import override
     from lhgraph.errors import InputError
     from lhgraph.report.text import format_comparison, print_solution
+    from lhgraph.workflow.inputs import calibration_beside
     from lhgraph.workflow.rundir import comparison_rows, is_run_directory, run_to_directory
     from lhgraph.workflow.solve import solve_to_files
     from lhgraph.workflow.solve_config import SolveConfig, load_solve_config
@@ -118,6 +123,10 @@ def run_solve(args: argparse.Namespace) -> int:
         config = replace(config, methods=None)
     if config.output is None:
         raise InputError("no output: give --output or set 'output' in the config")
+    calibration, note = calibration_beside(config.angles, config.calibration)
+    config = replace(config, calibration=calibration)
+    if note and not args.quiet:
+        print(f"lhgraph solve: {note}", file=sys.stderr)
     progress = progress_printer(args)
     if args.config and is_run_directory(config.output):
         shown = None if args.quiet else (lambda r: print_solution(r.result, r.errors,
@@ -153,12 +162,13 @@ def add_study(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("config", help="study TOML (e.g. configs/study_small.toml)")
     p.add_argument("--output", "-o", required=True, help="study directory")
     p.add_argument("--jobs", "-j", type=at_least(1, int), default=1,
-                   help="parallel processes (default 1)")
+                   help="parallel processes")
     p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of "
                    "local processes (needs lhgraph[dask])")
     p.add_argument("--force", action="store_true",
                    help="rerun every capture even when its result is stored")
     p.add_argument("--quiet", action="store_true", help="no progress output")
+    mark_inputs(p, "config")
     return p
 
 

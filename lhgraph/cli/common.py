@@ -18,6 +18,48 @@ Adder = Callable[[argparse._SubParsersAction], argparse.ArgumentParser]
 COMMANDS: list[tuple[str, Adder, Runner]] = []
 
 
+class StoreOnce(argparse._StoreAction):
+    """argparse's ``store`` action (every option and positional that takes a value) that
+    refuses a second value: ``--angles A.csv --angles B.csv`` would solve B alone."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: object, option_string: str | None = None) -> None:
+        given = namespace.__dict__.setdefault("_given_once", {})
+        if self.dest in given:
+            raise argparse.ArgumentError(self, f"given more than once ({given[self.dest]}, "
+                                         f"then {values}): give it once")
+        given[self.dest] = values
+        super().__call__(parser, namespace, values, option_string)
+
+
+class DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Help with every option's default, ``(default: X)``, unless it has none (None, False)
+    or its help already says what it is."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if action.default is None or action.default is False or "default" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
+
+
+class Parser(argparse.ArgumentParser):
+    """The parser of ``lhgraph`` and of every (sub-)subcommand (argparse makes subparsers of
+    their parent's class): single values stored once (:class:`StoreOnce`), defaults shown
+    (:class:`DefaultsFormatter`)."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        kwargs.setdefault("formatter_class", DefaultsFormatter)
+        super().__init__(*args, **kwargs)
+        self.register("action", None, StoreOnce)
+        self.register("action", "store", StoreOnce)
+
+
+def mark_inputs(p: argparse.ArgumentParser, *dests: str) -> None:
+    """Name the arguments of ``p`` that are input files: no output may be written over them,
+    not even with ``--force`` (:func:`lhgraph.io.files.guard_inputs`)."""
+    p.set_defaults(_inputs=dests)
+
+
 def at_least(low: float, kind: type = float, strict: bool = False
              ) -> Callable[[str], float]:
     """An argparse ``type``: a finite ``kind`` (int or float) of at least ``low`` (above it

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from lhgraph.cli.common import COMMANDS, add_common_output
+from lhgraph.cli.common import COMMANDS, add_common_output, mark_inputs
 
 # --- import ---
 # ``lhgraph import SOURCE ...``: one sub-subcommand per foreign recording format.
@@ -21,6 +21,7 @@ def _add_import_hive(sub: argparse._SubParsersAction) -> None:
                    help="write the angles as hive gives them, without raising the sweeps "
                    "that read one sync-bit length low (docs/hive.md)")
     add_common_output(p)
+    mark_inputs(p, "bag")
     p.set_defaults(_import=_run_import_hive)
 
 
@@ -35,7 +36,7 @@ def _run_import_hive(args: argparse.Namespace) -> int:
 
 
 def _add_import_crazyflie(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("crazyflie", help="Crazyflie uSD log (Lighthouse deck, LH1)",
+    p = sub.add_parser("crazyflie", help="Crazyflie uSD log (Lighthouse deck, LH1 or LH2)",
                        description="Convert a Crazyflie uSD event log (docs/crazyflie.md) into "
                        "angles.csv, board.toml, imu.csv, mocap.csv and, with --system-config, "
                        "ootx.toml and stations-cfclient.toml in the output directory.")
@@ -44,6 +45,7 @@ def _add_import_crazyflie(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mocap", help="Qualisys mocapNN.npy (default: beside logNN)")
     p.add_argument("--output", "-o", required=True, help="directory to write the files into")
     add_common_output(p)
+    mark_inputs(p, "log", "system_config", "mocap")
     p.set_defaults(_import=_run_import_crazyflie)
 
 
@@ -97,6 +99,7 @@ def add_export(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         p.add_argument(flag, choices=choices, default="auto", help="docs/export.md")
     p.add_argument("--at", type=float, metavar="S", help="time of the receiver-start pose")
     add_common_output(p)
+    mark_inputs(p, "stations", "calibration", "imu", "trajectory")
     p.set_defaults(_export=_run_export_cfclient)
     return export
 

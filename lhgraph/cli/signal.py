@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from lhgraph.choices import FORMATS, PERIODS, SYNCS
-from lhgraph.cli.common import COMMANDS, add_common_output, at_least
+from lhgraph.cli.common import COMMANDS, add_common_output, at_least, mark_inputs
 
 # --- decode ---
 
@@ -23,14 +23,15 @@ def add_decode(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--device", help="libsurvive device name (e.g. HMD)")
     p.add_argument("--board", help="board TOML: drop pulses of sensors not on it")
     p.add_argument("--sample-rate", type=at_least(0, float, strict=True),
-                   help="raw dump sample rate in Hz (2e6)")
+                   help="raw dump sample rate in Hz (default: 2e6)")
     p.add_argument("--period", choices=PERIODS,
                    help="rotor period: fitted to the sync train or 1/60 s (default: fit; "
                    "nominal for libsurvive recordings)")
     p.add_argument("--sync", choices=SYNCS, default="measured",
-                   help="time sweeps from each measured sync flash (default: a real "
-                   "station's flash and sweep jitter together) or from the fitted train")
+                   help="time sweeps from each measured sync flash (a real station's flash "
+                   "and sweep jitter together) or from the fitted train")
     add_common_output(p)
+    mark_inputs(p, "capture", "board")
     return p
 
 
@@ -73,15 +74,16 @@ def add_capture(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        "failures, 2 for bad arguments or an existing output.")
     p.add_argument("--port", required=True, help="serial port of the board (e.g. /dev/ttyUSB0)")
     p.add_argument("--output", "-o", required=True, help=".lhcap file to write")
-    p.add_argument("--duration", type=float, default=8.0, help="capture length in s (default 8)")
-    p.add_argument("--delay", type=float, default=0.0, help="start delay in s (default 0)")
-    p.add_argument("--baud", type=int, default=6_000_000, help="baud rate (default 6000000)")
+    p.add_argument("--duration", type=float, default=8.0, help="capture length in s")
+    p.add_argument("--delay", type=float, default=0.0, help="start delay in s")
+    p.add_argument("--baud", type=int, default=6_000_000, help="baud rate")
     p.add_argument("--no-arm", action="store_true",
                    help="download the capture the board already holds; do not record")
     p.add_argument("--discard-previous", action="store_true",
                    help="record even if the board holds a capture that was not downloaded "
                    "(it is lost); without this the board refuses")
     add_common_output(p)
+    mark_inputs(p, "port")
     return p
 
 

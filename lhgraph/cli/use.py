@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from lhgraph.choices import RENDERERS
-from lhgraph.cli.common import COMMANDS, add_common_output
+from lhgraph.cli.common import COMMANDS, add_common_output, mark_inputs
 
 # --- track ---
 
@@ -16,17 +16,20 @@ def add_track(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        description="Track the board through its angles with every station held "
                        "at its pose in the stations TOML; write the trajectory CSV "
                        "(docs/track.md).")
-    for flag, what in (("--stations", "stations TOML (held fixed)"), ("--angles", "angles CSV"),
-                       ("--board", "board TOML or built-in name (e.g. crazyflie_deck)"),
-                       ("--output", "trajectory CSV to write")):
-        p.add_argument(flag, required=True, help=what)
+    for flags, what in ((("--stations",), "stations TOML (held fixed)"),
+                        (("--angles",), "angles CSV"),
+                        (("--board",), "board TOML or built-in name (e.g. crazyflie_deck)"),
+                        (("--output", "-o"), "trajectory CSV to write")):
+        p.add_argument(*flags, required=True, help=what)
     p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
     p.add_argument("--imu", help="the receiver's imu.csv (board frame, the angles' clock): "
                    "gyro and accelerometer factors (batch only; docs/track.md)")
     p.add_argument("--streaming", action="store_true", help="one sync cycle at a time")
     p.add_argument("--delay", type=float, metavar="S",
-                   help="streaming: report each state S seconds after it (docs/track.md)")
+                   help="streaming: report each state S seconds after it (default: 0.1; "
+                   "docs/track.md)")
     add_common_output(p)
+    mark_inputs(p, "stations", "angles", "board", "calibration", "imu")
     return p
 
 
@@ -58,8 +61,9 @@ def add_view(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--method", help="of a multi-method run directory, show only this method")
     p.add_argument("--export", help="write FILE.png, .ply, .glb, .gltf or .obj instead")
     p.add_argument("--renderer", choices=RENDERERS, default="auto",
-                   help="PNG renderer (default: Open3D offscreen, else matplotlib)")
+                   help="PNG renderer (auto: Open3D offscreen, else matplotlib)")
     add_common_output(p)
+    mark_inputs(p, "run_dir")
     return p
 
 

@@ -157,3 +157,30 @@ def plane_cycles(angles: Angles) -> Angles:
         state[rows[1:][joins]] = rows[:-1][joins]
     return Angles(angles.time, angles.lighthouse, angles.axis, angles.sensor, angles.angle,
                   {**angles.extra, "sweep": state[ids]})
+
+
+LH2_REVOLUTION_S = (18.0e-3, 20.5e-3)
+"""One LH2 revolution (the channels' periods, 18.48-19.98 ms, SPEC §8), with room for
+jitter: an LH2 station's light planes pass once per revolution."""
+LH1_TURN_TOLERANCE_S = 2e-3
+"""An LH1 station sweeps an axis a whole number of rotor turns (1/60 s) apart, to within
+this (hive's stamps: 1.3 ms median; an LH2 revolution misses the grid by 1.8 ms or more)."""
+
+
+def swept_generations(angles: Angles, min_gaps: int = 10) -> dict[int, int | None]:
+    """Per station, the generation its sweeps' timing shows (SPEC §3, §8): 2 when most gaps
+    between consecutive sweeps of one axis are one LH2 revolution (:data:`LH2_REVOLUTION_S`),
+    1 when most are whole LH1 rotor turns (:data:`LH1_TURN_TOLERANCE_S`), None when neither
+    or with fewer than ``min_gaps`` gaps."""
+    _, t, station, axis = sweep_table(angles)
+    turn = 2 * SLOT_S
+    out: dict[int, int | None] = {}
+    for s in np.unique(station).tolist():
+        gaps = np.concatenate([np.diff(np.sort(t[(station == s) & (axis == a)]))
+                               for a in (0, 1)])
+        turns = np.round(gaps / turn)
+        lh1 = np.mean((turns >= 1) & (np.abs(gaps - turns * turn) <= LH1_TURN_TOLERANCE_S))
+        lh2 = np.mean((gaps >= LH2_REVOLUTION_S[0]) & (gaps <= LH2_REVOLUTION_S[1]))
+        out[s] = (None if len(gaps) < min_gaps else 2 if lh2 > 0.5 else 1 if lh1 > 0.5
+                  else None)
+    return out

@@ -2,7 +2,8 @@
 
 Every problem raises :class:`~lhgraph.errors.InputError` naming the file and the key or row.
 Every output goes through :func:`write_atomic` (temporary file, fsync, rename; never
-replaces an existing file unless asked).
+replaces an existing file unless asked); inside :func:`guard_inputs` never one of the
+command's input files either.
 """
 
 from __future__ import annotations
@@ -11,9 +12,12 @@ import contextlib
 import csv
 import math
 import os
+import stat
 import tomllib
 import warnings
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextvars import ContextVar
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -77,16 +81,74 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise InputError("not a text file", path) from None
 
 
+@dataclass
+class _Guard:
+    """What :func:`guard_inputs` holds: the input files by (device, inode), and who is told
+    of a created folder."""
+
+    inputs: dict[tuple[int, int], Path] = field(default_factory=dict)
+    on_created: Callable[[Path], None] | None = None
+
+
+_GUARD: ContextVar[_Guard | None] = ContextVar("lhgraph_input_guard", default=None)
+
+
+@contextlib.contextmanager
+def guard_inputs(paths: Iterable[str | Path | None],
+                 on_created: Callable[[Path], None] | None = None) -> Iterator[None]:
+    """While active, :func:`check_writable` (so every writer) refuses to write over any of
+    the input files ``paths`` (also through another spelling, a symbolic or a hard link),
+    with or without ``overwrite``; ``on_created(folder)`` is called for each output folder
+    it creates. More inputs join with :func:`protect_inputs` (e.g. those a config names)."""
+    token = _GUARD.set(_Guard(on_created=on_created))
+    try:
+        protect_inputs(paths)
+        yield
+    finally:
+        _GUARD.reset(token)
+
+
+def protect_inputs(paths: Iterable[str | Path | None]) -> None:
+    """Add the regular files among ``paths`` to the active :func:`guard_inputs` (none
+    active: nothing to do; missing files and directories are skipped)."""
+    guard = _GUARD.get()
+    if guard is None:
+        return
+    for p in paths:
+        with contextlib.suppress(OSError, TypeError, ValueError):
+            st = os.stat(p)  # type: ignore[arg-type]
+            if stat.S_ISREG(st.st_mode):
+                guard.inputs[(st.st_dev, st.st_ino)] = Path(p)  # type: ignore[arg-type]
+
+
+def _refuse_input(path: Path) -> None:
+    """InputError when ``path`` is one of the guarded input files."""
+    guard = _GUARD.get()
+    if guard is None or not guard.inputs:
+        return
+    try:
+        st = os.stat(path)
+    except OSError:
+        return
+    source = guard.inputs.get((st.st_dev, st.st_ino))
+    if source is not None:
+        same = "" if source == path else f" ({source})"
+        raise InputError(f"is an input of this command{same}: write the output elsewhere "
+                         "(--force never overwrites an input)", path)
+
+
 def check_writable(path: str | Path, overwrite: bool, *, create_parents: bool = True) -> Path:
     """Refuse an output ``path`` that cannot be written, before any work is done.
 
-    InputError when ``path`` is a directory, exists and not ``overwrite``, or lies under a
-    regular file or in a directory that is not writable. Missing parent directories are
-    created when ``create_parents``, else only checked (nothing is created).
+    InputError when ``path`` is a directory, one of the inputs :func:`guard_inputs`
+    guards, exists and not ``overwrite``, or lies under a regular file or in a directory
+    that is not writable. Missing parent directories are created when ``create_parents``
+    (and reported to the guard's ``on_created``), else only checked (nothing is created).
     """
     path = Path(path)
     if path.is_dir():
         raise InputError("is a directory", path)
+    _refuse_input(path)
     if path.exists() and not overwrite:
         raise InputError("exists already (use --force to overwrite)", path)
     base = path.parent
@@ -96,12 +158,15 @@ def check_writable(path: str | Path, overwrite: bool, *, create_parents: bool = 
         raise InputError("is not a directory", base)
     if not os.access(base, os.W_OK | os.X_OK):
         raise InputError("directory is not writable", base)
-    if create_parents:
+    if create_parents and not path.parent.exists():
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise InputError(f"cannot create the directory: {exc.strerror or exc}",
                              path.parent) from None
+        guard = _GUARD.get()
+        if guard is not None and guard.on_created is not None:
+            guard.on_created(path.parent)
     return path
 
 

@@ -27,7 +27,7 @@ from lhgraph.io.files import (
     station_tables,
     write_toml,
 )
-from lhgraph.model.calibration import generation_keys, generation_terms
+from lhgraph.model.calibration import check_ranges, generation_keys, generation_terms
 from lhgraph.model.station import CALIBRATION_KEYS, FactoryCalibration, StationModel
 
 
@@ -73,6 +73,7 @@ def _parse_model(table: dict[str, Any], path: str | Path, where: str) -> Station
         if key in table:
             values[key] = as_vector(table[key], 2, path, f"{where}.{key}")
     generation, channel = generation_terms(table, path, where, values)
+    check_ranges(values, path, where)
     offsets = np.zeros((2, 3))
     if "rotor_offsets" in table:
         offsets = as_matrix(table["rotor_offsets"], 2, 3, path, f"{where}.rotor_offsets")

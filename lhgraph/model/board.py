@@ -46,6 +46,18 @@ MAX_EXTENT_M = 10.0
 """A board file's sensors lie within this distance of its origin on every axis (m)."""
 MIN_SPAN_M = 1e-3
 """A board file's sensors span at least this much on some axis (m)."""
+MIN_SEPARATION_M = 1e-3
+"""Two sensors of a board file are at least this far apart (m; real diodes: 8.8 mm and
+more): nearer, one diode is listed twice."""
+
+
+def coincident_sensors(ids: list[int], positions: list[NDArray[np.float64]]
+                       ) -> list[tuple[int, int]]:
+    """Pairs of sensor ids whose positions are less than :data:`MIN_SEPARATION_M` apart."""
+    p = np.asarray(positions, dtype=float).reshape(-1, 3)
+    i, j = np.nonzero(np.triu(np.linalg.norm(p[:, None] - p[None], axis=2)
+                              < MIN_SEPARATION_M, k=1))
+    return [(ids[a], ids[b]) for a, b in zip(i.tolist(), j.tolist(), strict=True)]
 
 
 def make_board(positions: ArrayLike, normals: ArrayLike, ids: ArrayLike | None = None,
@@ -92,6 +104,12 @@ def load_board(path: str | Path) -> Board:
     if len(pos) > 1 and np.ptp(np.array(pos), axis=0).max() < MIN_SPAN_M:
         raise InputError(f"the sensors' positions span less than {MIN_SPAN_M * 1e3:g} mm: "
                          "not a board a pose can be solved from", path, "sensors")
+    if pairs := coincident_sensors(ids, pos):
+        shown = ", ".join(f"{a} and {b}" for a, b in pairs[:5])
+        more = f" (and {len(pairs) - 5} more pairs)" if len(pairs) > 5 else ""
+        raise InputError(f"duplicate sensor positions: sensors {shown}{more} are less than "
+                         f"{MIN_SEPARATION_M * 1e3:g} mm apart (one diode listed twice?)",
+                         path, "sensors")
     return make_board(pos, nrm, ids, name=str(data.get("name", Path(path).stem)))
 
 

@@ -5,7 +5,8 @@
 the station's native frame, :mod:`lhgraph.estimation.gravity`); K is the station index used in the
 angles CSV. Added for LH2 stations (all optional, docs/formats.md): ``generation`` (1 or 2;
 1 when absent), ``ogeephase, ogeemag`` (``[plane0, plane1]``, rad; LH2 only) and
-``channel`` (1-16, the station's LH2 channel).
+``channel`` (1-16, the station's LH2 channel). Every term is range-checked on load
+(:data:`CALIBRATION_RANGES`).
 """
 
 from __future__ import annotations
@@ -29,6 +30,29 @@ from lhgraph.model.station import (
 
 N_CHANNELS = 16
 """LH2 stations broadcast on channels 1-16 (SPEC §8)."""
+
+CALIBRATION_RANGES: dict[str, float] = {
+    "phase": 0.2, "tilt": 0.2, "curve": 1.0, "gibphase": 2 * np.pi, "gibmag": 0.1,
+    "ogeephase": 2 * np.pi, "ogeemag": 1.0, "accel_dir": 128.0,
+}
+"""The largest magnitude a factory-calibration term may have (rad; ``accel_dir``: the int8
+reading). Generous: real stations' terms are at most 0.062 (phase), 0.052 (tilt), 0.42
+(curve, LH2), 0.021 (gibmag) and 0.46 (ogeemag, LH2); the phases (gibphase, ogeephase) are
+angles, within one turn either side of zero. A value outside is not a factory calibration
+(e.g. 0.5 rad of phase would move a station's every angle by 29 deg). docs/formats.md."""
+
+
+def check_ranges(values: dict[str, NDArray[np.float64]], path: str | Path, where: str) -> None:
+    """InputError naming the first term of ``values`` (key -> vector) outside
+    :data:`CALIBRATION_RANGES`, its value and the allowed range."""
+    for key, value in values.items():
+        bound = CALIBRATION_RANGES.get(key)
+        bad = [] if bound is None else np.flatnonzero(~(np.abs(value) <= bound))
+        if len(bad):
+            i = int(bad[0])
+            raise InputError(f"{value[i]:g} is outside the plausible range [{-bound:g}, "
+                             f"{bound:g}]{'' if key == 'accel_dir' else ' rad'}", path,
+                             f"{where}.{key}[{i}]")
 
 
 @dataclass(frozen=True)
@@ -87,6 +111,7 @@ def load_calibration(path: str | Path) -> dict[int, StationCalibration]:
         if "accel_dir" in table:
             accel = as_vector(table["accel_dir"], 3, path, where + ".accel_dir")
         generation, channel = generation_terms(table, path, where, values)
+        check_ranges(values | {"accel_dir": accel}, path, where)
         out[index] = StationCalibration(FactoryCalibration(**values), station_id, accel,
                                         generation, channel)
     return out

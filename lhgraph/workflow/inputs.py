@@ -1,7 +1,9 @@
 """What a solve configuration's files hold: board, angles (read or decoded), station models.
 
 :func:`check_inputs` refuses missing input files before anything is written;
-:func:`load_inputs` reads them all.
+:func:`load_inputs` reads them all. :func:`calibration_beside` finds the ``ootx.toml`` that
+decode and the importers write beside the angles; :func:`check_generations` refuses a
+calibration of the other Lighthouse generation than the angles' sweeps.
 """
 
 from __future__ import annotations
@@ -14,11 +16,14 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.estimation.gravity import up_vectors
+from lhgraph.estimation.sweep_times import swept_generations
 from lhgraph.io.angles import Angles, load_angles
+from lhgraph.io.files import protect_inputs
 from lhgraph.io.imu import ImuStream, load_imu
 from lhgraph.model.board import Board, load_board
 from lhgraph.model.calibration import StationCalibration, load_calibration
 from lhgraph.model.station import Convention, StationModel
+from lhgraph.signal.formats import OOTX_FILE
 from lhgraph.workflow.solve_config import SolveConfig
 
 
@@ -28,6 +33,38 @@ def station_models(calibration_path: str | Path | None,
     if calibration_path is None:
         return {}
     return models_of(load_calibration(calibration_path), convention)
+
+
+def calibration_beside(angles: str | Path | None, calibration: str | Path | None
+                       ) -> tuple[Path | None, str | None]:
+    """The factory calibration to use with ``angles``: ``calibration`` when given, else the
+    ``ootx.toml`` beside the angles file (as decode and the importers write it) with one
+    line saying so (the file joins the guarded inputs, :func:`~lhgraph.io.files.
+    protect_inputs`), else None (ideal stations)."""
+    if calibration is not None or angles is None:
+        return (None if calibration is None else Path(calibration)), None
+    beside = Path(angles).parent / OOTX_FILE
+    if not beside.is_file():
+        return None, None
+    protect_inputs([beside])
+    return beside, (f"using the factory calibration beside the angles, {beside} "
+                    "(--calibration to give another)")
+
+
+def check_generations(models: dict[int, StationModel], angles: Angles,
+                      calibration: str | Path, source: str | Path) -> None:
+    """InputError naming ``calibration`` when a station's model (from it) is of the other
+    Lighthouse generation than its sweeps in ``angles`` (read from ``source``) show
+    (:func:`~lhgraph.estimation.sweep_times.swept_generations`)."""
+    swept = swept_generations(angles)
+    for generation, how in ((1, "LH2's, once per 18.5-20 ms revolution"),
+                            (2, "LH1's, whole 1/60 s rotor turns apart")):
+        wrong = sorted(k for k, m in models.items()
+                       if m.generation == generation and swept.get(k) not in (None, generation))
+        if wrong:
+            raise InputError(f"station(s) {', '.join(map(str, wrong))} are LH{generation} in "
+                             f"this file but their sweeps in {source} are {how}: not a "
+                             "calibration of these stations (wrong ootx.toml?)", calibration)
 
 
 def models_of(calibrations: dict[int, StationCalibration],
@@ -52,7 +89,9 @@ class SolveInputs:
 def check_inputs(config: SolveConfig) -> None:
     """InputError unless every input file the config names exists and is a file (run before
     any output is created, so a bad input leaves nothing behind)."""
-    for name in ("board", "angles", "capture", "calibration", "truth", "imu"):
+    names = ("board", "angles", "capture", "calibration", "truth", "imu")
+    protect_inputs([config.path, *(getattr(config, name) for name in names)])
+    for name in names:
         path = getattr(config, name)
         if path is None:
             continue
@@ -83,6 +122,8 @@ def load_inputs(config: SolveConfig) -> SolveInputs:
     else:
         raise InputError("no angles: give 'angles' or 'capture'", config.path, "angles")
     angles.check_board(board, source)
+    if config.calibration is not None:
+        check_generations(models_of(calibrations), angles, config.calibration, source)
     if config.duration_s is not None:
         from lhgraph.workflow.window import moving_window
 

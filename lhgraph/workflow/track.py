@@ -26,7 +26,7 @@ from lhgraph.io.imu import load_imu
 from lhgraph.io.stations import load_stations
 from lhgraph.io.trajectory import save_trajectory
 from lhgraph.model.boards import board_by_name
-from lhgraph.workflow.inputs import station_models
+from lhgraph.workflow.inputs import calibration_beside, check_generations, station_models
 
 Progress = Callable[[str], None]
 
@@ -58,12 +58,15 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
                 progress: Progress | None = None, delay_s: float | None = None,
                 imu: str | Path | None = None) -> TrackOutput:
     """Track the board of ``board`` (a board TOML or a built-in name) through ``angles`` with
-    the stations of ``stations`` held fixed (factory calibration from ``calibration`` if
-    given, else the stations file's keys) and write the trajectory CSV ``output``;
-    ``streaming``: per sync cycle, each state as estimated ``delay_s`` after it (default
+    the stations of ``stations`` held fixed and write the trajectory CSV ``output``.
+
+    Factory calibration: ``calibration`` if given, else the stations file's keys, else the
+    ``ootx.toml`` beside the angles (said through ``progress``); one of the other generation
+    than the angles' sweeps is refused (InputError). ``streaming``: per sync cycle, each
+    state as estimated ``delay_s`` after it (default
     :data:`~lhgraph.estimation.graph.streaming.DELAY_S`); ``imu``: the receiver's
     ``imu.csv`` (board frame, the angles' clock) for the graph's IMU factors (batch only)."""
-    check_writable(output, overwrite)
+    check_writable(output, overwrite, create_parents=False)  # the folder: when writing
     if imu is not None and streaming:
         raise InputError("IMU factors are batch only: drop --streaming or --imu", "--imu")
     if delay_s is not None and not streaming:
@@ -82,7 +85,14 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
     if missing:
         raise InputError(f"no [lighthouses.<index>] table for station(s) "
                          f"{', '.join(map(str, missing))} seen in {angles}", stations)
+    if calibration is None and all(s.model.calibration.is_zero()
+                                   for s in fixed.stations.values()):
+        calibration, note = calibration_beside(angles, None)
+        if note and progress is not None:
+            progress(note)
     models = station_models(calibration)
+    if calibration is not None:
+        check_generations(models, the_angles, calibration, angles)
     stream = None if imu is None else load_imu(imu)
     if streaming:
         estimates = list(track_stream(the_board, the_angles, fixed, models, options,
