@@ -1,5 +1,5 @@
 """The package's structure stays as docs/architecture.md describes it: modules of one
-concept (short), no import cycles, the layers importing only downwards."""
+concept (short), no import cycles, the layers importing only downwards, no god classes."""
 
 from __future__ import annotations
 
@@ -100,3 +100,30 @@ def test_layers_import_downwards():
             if layer(i) > layer(m):
                 upward.append(f"{m} imports {i}")
     assert not upward, "\n".join(sorted(upward))
+
+
+MAX_METHODS = 22
+MAX_CLASS_LINES = 280
+MAX_FIELDS = 30
+WIRE_FORMATS = {"lhgraph.device.protocol"}
+"""Modules whose classes mirror the firmware's wire formats field by field (exempt from
+``MAX_FIELDS``)."""
+
+
+def classes() -> list[tuple[str, ast.ClassDef]]:
+    """Every class of the package, with its module."""
+    return [(name, node) for name, path in modules().items()
+            for node in ast.walk(ast.parse(path.read_text())) if isinstance(node, ast.ClassDef)]
+
+
+@pytest.mark.parametrize("name, node", classes(), ids=lambda x: getattr(x, "name", x))
+def test_class_is_small(name, node):
+    """No god classes: at most MAX_METHODS methods and MAX_CLASS_LINES lines a class, and at
+    most MAX_FIELDS annotated fields unless it mirrors a wire format."""
+    methods = [b for b in node.body if isinstance(b, ast.FunctionDef | ast.AsyncFunctionDef)]
+    fields = [b for b in node.body if isinstance(b, ast.AnnAssign)]
+    assert len(methods) <= MAX_METHODS, f"{name}.{node.name}: {len(methods)} methods"
+    lines = node.end_lineno - node.lineno + 1
+    assert lines <= MAX_CLASS_LINES, f"{name}.{node.name}: {lines} lines"
+    assert len(fields) <= MAX_FIELDS or name in WIRE_FORMATS, \
+        f"{name}.{node.name}: {len(fields)} annotated fields"
