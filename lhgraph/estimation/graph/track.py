@@ -8,7 +8,7 @@ no station variable; Levenberg-Marquardt and the noise adaptation as in
 (:func:`lhgraph.estimation.init.pnp_kabsch.station_paths`) put into the world by the known
 ``T_world_lh`` and merged by time (:func:`~lhgraph.estimation.init.pnp_kabsch.world_states`).
 Few-diode data (the Crazyflie deck: 4 diodes, of which a sweep holds ~3) is prepared as for
-the calibration (:func:`~lhgraph.estimation.graph.solver.graph_preparation`: one state
+the calibration (:func:`~lhgraph.estimation.graph.resolve.prepare`: one state
 per station rotor cycle) and starts from the planar twins with the stations known
 (:meth:`~lhgraph.estimation.init.few_diode.FewDiodeInitialiser.with_stations`). Each state's
 position standard deviation ``sigma_m`` (from the marginal covariance) says how well its
