@@ -1,6 +1,7 @@
 """The IMU factors' residuals and Jacobians at the batch graph's evaluated point, vectorised:
 :class:`ImuTerms`, held by the twist factor family
-(:class:`~lhgraph.estimation.imu.families.TwistImu`) when the graph has them (:mod:`lhgraph.estimation.imu.inertial`).
+(:class:`~lhgraph.estimation.imu.families.TwistImu`) when the graph has them
+(:mod:`lhgraph.estimation.imu.inertial`).
 
 Variables read: the IMU bias ``I(0)``, the gravity ``N(0)`` and, when the options ask for it,
 the IMU calibration ``C(0)`` (per-axis gyro scale error ``s``, time offset ``tau``, rotation
