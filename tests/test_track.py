@@ -179,3 +179,9 @@ def test_streaming_refuses_what_it_cannot_honour(board32, name, value):
         list(track_stream(board32.board, board32.angles, board32.truth,
                           options=GraphOptions.of(**{name: value})))
 
+
+
+def test_track_refuses_rest_thinning(board32):
+    with pytest.raises(InputError, match="rest_keep_every"):
+        track(board32.board, board32.angles, board32.truth,
+              options=GraphOptions.of(rest_keep_every=3))

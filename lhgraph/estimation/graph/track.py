@@ -245,6 +245,10 @@ def track(board: Board, angles: Angles, stations: Stations,
     accelerometer factors join the graph (:mod:`lhgraph.estimation.imu.inertial`), the initial
     angular rates are the gyro's, and the IMU bias and the world's gravity are estimated."""
     options = options or GraphOptions()
+    if options.data.rest_keep_every > 1:
+        raise InputError("the tracker keeps every hit (the path is the product): "
+                         "rest_keep_every thins the calibration's rests only; leave it at 1",
+                         where="rest_keep_every")
     t0 = time.perf_counter()
     angles, facts = prepare(angles, options, models or {k: stations.stations[k].model
                                                         for k in stations.indices()},
