@@ -2,6 +2,7 @@
 interface both must share): same answers, and the whole `lhgraph solve` process timed.
 
     python -m benchmarks compare_revisions --base REV [--head REV] [--runs 5] [--seeds 2]
+        [--log IMPORTED_LOG_DIR ...]
         [--output docs/results/compare_revisions.md] [--force]
 
 ``--base`` and ``--head`` are git revisions checked out into temporary worktrees; without
@@ -22,6 +23,9 @@ its checkout and its bytecode compiled first, as an install does.
    warm-up each, ``--runs`` pairs; wall time and the children's CPU time per run, medians and
    the ratio head/base pair by pair; beside it the bare ``python -c "import numpy, gtsam"``
    process, the floor neither can go below.
+3. With ``--log DIR`` (repeatable; an ``lhgraph import`` output folder: board.toml,
+   angles.csv, ootx.toml): that log solved alike by both revisions, timed the same way, and
+   the largest station position difference between their answers.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import tomllib
 from contextlib import ExitStack
 from datetime import date
 from pathlib import Path
@@ -150,17 +155,13 @@ def graph_summary(summary: dict) -> dict:
             "error_mm": max(errors, default=float("nan"))}
 
 
-def timing(base: Path, head: Path, work: Path, runs: int) -> list[str]:
-    """Section 2: the whole process, alternating."""
-    cap = work / "default-8s"
-    lhgraph(base, "simulate", "--seed", "1", "--output", str(cap))
+def timing(base: Path, head: Path, work: Path, runs: int, inputs: list[str], title: str
+           ) -> list[str]:
+    """The whole ``lhgraph solve`` process on ``inputs`` (its ``--board``, ``--angles``, ...
+    arguments), base and head alternating."""
     trees = {"base": base, "head": head, "bare": base}
-    for tree in (base, head):
-        subprocess.run([sys.executable, "-m", "compileall", "-q", str(tree / "lhgraph")],
-                       check=True)
-    solve = [sys.executable, "-m", "lhgraph", "solve", "--board", str(cap / "board.toml"),
-             "--angles", str(cap / "angles.csv"), "--output", str(work / "out.toml"), "--force",
-             "--quiet"]
+    solve = [sys.executable, "-m", "lhgraph", "solve", *inputs, "--output",
+             str(work / "out.toml"), "--force", "--quiet"]
     bare = [sys.executable, "-c", "import numpy, gtsam"]
     for name in ("base", "head"):  # warm-up
         timed(solve, trees[name])
@@ -175,18 +176,44 @@ def timing(base: Path, head: Path, work: Path, runs: int) -> list[str]:
         wall["bare"].append(w)
         cpu["bare"].append(c)
     ratio = np.array(wall["head"]) / np.array(wall["base"])
+    cpu_ratio = np.array(cpu["head"]) / np.array(cpu["base"])
     med = {k: float(np.median(v)) for k, v in wall.items()}
     rows = ["| process | wall median (min-max) s | CPU median s |", "|---|---|---|"]
     for name, label in (("base", "base `lhgraph solve`"), ("head", "head `lhgraph solve`"),
                         ("bare", "`python -c \"import numpy, gtsam\"`")):
         rows.append(f"| {label} | {med[name]:.3f} ({min(wall[name]):.3f}-{max(wall[name]):.3f}) "
                     f"| {np.median(cpu[name]):.3f} |")
-    return ["## 2. Whole `lhgraph solve` process, 8 s capture", "",
+    return [f"## Whole `lhgraph solve` process, {title}", "",
             f"{runs} pairs after one warm-up each, base and head alternating, bare import "
             "after each pair.", "", *rows, "",
-            f"Ratio head / base, pair by pair: median {np.median(ratio):.3f} "
-            f"(min {ratio.min():.3f}, max {ratio.max():.3f}); above the bare import: "
+            f"Ratio head / base, pair by pair: wall median {np.median(ratio):.3f} "
+            f"(min {ratio.min():.3f}, max {ratio.max():.3f}), CPU median "
+            f"{np.median(cpu_ratio):.3f}; above the bare import: "
             f"{(med['head'] - med['bare']) / (med['base'] - med['bare']):.3f}.", ""]
+
+
+def log_inputs(folder: Path) -> list[str]:
+    """The ``lhgraph solve`` inputs of an imported log ``folder`` (``lhgraph import``'s
+    board.toml, angles.csv and ootx.toml)."""
+    inputs = ["--board", str(folder / "board.toml"), "--angles", str(folder / "angles.csv")]
+    if (folder / "ootx.toml").is_file():
+        inputs += ["--calibration", str(folder / "ootx.toml")]
+    return inputs
+
+
+def same_answer(base: Path, head: Path, work: Path, inputs: list[str]) -> str:
+    """One line: the largest station difference between the two revisions' solves of
+    ``inputs``."""
+    out = {}
+    for name, tree in (("base", base), ("head", head)):
+        out[name] = work / f"{name}.toml"
+        subprocess.run([sys.executable, "-m", "lhgraph", "solve", *inputs, "--output",
+                        str(out[name]), "--force", "--quiet"], env=tree_env(tree), cwd=tree,
+                       check=True)
+    a, b = (tomllib.loads(out[n].read_text())["lighthouses"] for n in ("base", "head"))
+    d_mm = max(float(np.max(np.abs(np.subtract(a[k]["position"], b[k]["position"])))) * 1e3
+               for k in a)
+    return f"largest station position difference head - base: {d_mm:.3g} mm"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -197,6 +224,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=2)
     parser.add_argument("--output", default=str(ROOT / "docs/results/compare_revisions.md"))
     parser.add_argument("--force", action="store_true")
+    parser.add_argument("--log", action="append", default=[], type=Path,
+                        help="an imported log folder (lhgraph import's output) to solve and "
+                             "time too; repeatable")
     args = parser.parse_args(argv)
     out = Path(args.output)
     if out.exists() and not args.force:
@@ -218,7 +248,18 @@ def main(argv: list[str] | None = None) -> int:
                  f"{os.cpu_count()} cores, Python {platform.python_version()}; {date.today()}",
                  ""]
         lines += answers(base, head, work, args.seeds)
-        lines += timing(base, head, work, args.runs)
+        cap = work / "default-8s"
+        lhgraph(base, "simulate", "--seed", "1", "--output", str(cap))
+        for tree in (base, head):
+            subprocess.run([sys.executable, "-m", "compileall", "-q", str(tree / "lhgraph")],
+                           check=True)
+        lines += timing(base, head, work, args.runs,
+                        ["--board", str(cap / "board.toml"), "--angles",
+                         str(cap / "angles.csv")], "8 s capture")
+        for folder in args.log:
+            inputs = log_inputs(folder)
+            lines += timing(base, head, work, args.runs, inputs, f"log `{folder.name}`")
+            lines += [same_answer(base, head, work, inputs), ""]
     out.write_text("\n".join(lines))
     print("\n".join(lines))
     return 0
