@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lhgraph.errors import InputError
+from lhgraph.errors import InputError, SolverError
 from lhgraph.estimation.world_alignment import (
     STANDARD_GRAVITY_MPS2,
     UpEstimate,
@@ -124,6 +124,22 @@ def system_type(stations: Stations, stations_path: str | Path,
     return generation
 
 
+def verdict_warnings(stations: Stations, stations_path: str | Path, unverified: bool
+                     ) -> list[str]:
+    """What the stations file's ``verdict`` table (a ``lhgraph solve`` result's) says about
+    exporting it: SolverError (exit 3) for a failed result unless ``unverified``; a warning
+    for a failed one exported anyway and for one to be checked; nothing for a file without a
+    verdict (a truth file, cfclient's geometry) or an OK one."""
+    table = stations.extra.get("verdict")
+    if not isinstance(table, dict) or table.get("status") in (None, "ok"):
+        return []
+    text = str(table.get("text") or table.get("status"))
+    if table.get("status") == "failed" and not unverified:
+        raise SolverError(f"{stations_path}: the result's verdict is {text}; solve again, or "
+                          "export it anyway with --force-unverified")
+    return [f"exporting a result whose verdict is {text}"]
+
+
 def _up(options: WorldOptions, stations: Stations,
         calibrations: dict[int, StationCalibration] | None, imu: ImuStream | None,
         trajectory: Trajectory | None) -> UpEstimate:
@@ -149,7 +165,7 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
                     calibration: str | Path | None = None, imu: str | Path | None = None,
                     trajectory: str | Path | None = None,
                     options: WorldOptions | None = None,
-                    overwrite: bool = False) -> ExportResult:
+                    overwrite: bool = False, unverified: bool = False) -> ExportResult:
     """Write ``stations_path`` (a stations TOML, LH1 or LH2: :func:`system_type`) as
     cfclient's ``system-config.yaml``.
 
@@ -159,6 +175,8 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
     ``lhgraph track``): the receiver's data for ``up = imu`` and the receiver-start choices.
     The calibration's terms are written through the mapping of the system type
     (:data:`lhgraph.io.cfclient.CALIBRATION_MAPPINGS`; LH2: Bitcraze's terms are ours).
+    A result whose ``verdict`` failed (e.g. a solve stopped at its iteration limit) is
+    refused unless ``unverified`` (:func:`verdict_warnings`).
     """
     options = options or WorldOptions()
     output = check_writable(output, overwrite, create_parents=False)
@@ -166,6 +184,7 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
         raise InputError("--imu needs --trajectory: the receiver's poses carry its "
                          "accelerometer into the stations' world")
     stations = load_stations(stations_path)
+    verdict_notes = verdict_warnings(stations, stations_path, unverified)
     calibrations = None if calibration is None else load_calibration(calibration)
     system = system_type(stations, stations_path, calibrations, calibration)
     stream = None if imu is None else load_imu(imu)
@@ -183,4 +202,4 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
     path = write_system_config(config, output, overwrite)
     moved = dataclasses.replace(moved, extra={**moved.extra, "world": "cfclient"})
     return ExportResult(path, config, moved, alignment,
-                        tuple(warnings) + alignment.warnings)
+                        tuple(verdict_notes + warnings) + alignment.warnings)
