@@ -96,3 +96,42 @@ def test_verdict_status_and_reasons_name_their_cause():
     assert track_verdict("converged", 10, good, 3.0).ok
     g = track_verdict("converged", 10, good, 3.0, 1.0)
     assert g.failed and "not g" in g.text()
+
+
+def _track(folder: Path, stations: Path, out: Path, *extra: str) -> int:
+    return main(["track", "--stations", str(stations), "--board", str(folder / "board.toml"),
+                 "--angles", str(folder / "angles.csv"), "--output", str(out), *extra])
+
+
+def test_track_reports_residuals_and_fails_on_another_rooms_stations(capture, tmp_path,
+                                                                      capsys):
+    assert _track(capture, capture / "truth.toml", tmp_path / "t.csv") == 0
+    out = capsys.readouterr().out
+    assert "residuals:" in out and "mm at the median range" in out
+    assert "verdict: OK" in out.splitlines()
+    # the stations of another simulated room: exit 3 naming the stations as the cause
+    other = tmp_path / "other"
+    far = load_simulation_config(CONFIG.with_name("far.toml"))
+    write_simulation(simulate(dataclasses.replace(far, duration_s=0.5), 11), other)
+    assert _track(capture, other / "truth.toml", tmp_path / "t2.csv") == 3
+    out = capsys.readouterr().out
+    assert "verdict: FAILED" in out and "the angles do not fit these stations" in out
+    assert "another room" in out and "IMU" not in out
+
+
+def test_track_with_an_accelerometer_in_g_fails(tmp_path, capsys):
+    from lhgraph.io.imu import load_imu, save_imu
+    from lhgraph.sim.imu import ImuConfig
+
+    config = dataclasses.replace(load_simulation_config(CONFIG), duration_s=2.0,
+                                 imu=ImuConfig(rate_hz=200.0))
+    write_simulation(simulate(config, 5), tmp_path)
+    assert _track(tmp_path, tmp_path / "truth.toml", tmp_path / "t.csv",
+                  "--imu", str(tmp_path / "imu.csv")) == 0
+    assert "verdict: OK" in capsys.readouterr().out
+    imu = load_imu(tmp_path / "imu.csv")
+    in_g = dataclasses.replace(imu, accel_mps2=imu.accel_mps2 / 9.80665)
+    save_imu(in_g, tmp_path / "imu_g.csv")
+    assert _track(tmp_path, tmp_path / "truth.toml", tmp_path / "t2.csv",
+                  "--imu", str(tmp_path / "imu_g.csv")) == 3
+    assert "not g" in capsys.readouterr().out

@@ -69,14 +69,18 @@ def coverage(points: NDArray[np.float64]) -> float:
 
 
 VERDICT_STATUSES = ("ok", "check", "failed")
-MAX_TRACK_SPREAD_MM = 5.0
+MAX_TRACK_SPREAD_MM = 1.0
 """A track fails when its residuals' robust spread, times the median station-board range,
-exceeds this (mm): the angles do not fit the stations (a real deck log through its own
-calibration: 0.2 mm)."""
+exceeds this (mm): the angles do not fit the stations (the real deck logs through their own
+calibrations: 0.2-0.3 mm)."""
 MIN_TRACK_INLIERS = 0.5
 """A track fails when fewer of its hits than this fraction are inliers."""
 MAX_GRAVITY_ERROR = 0.1
 """A track with an IMU fails when its estimated gravity is this fraction off 1 g."""
+MAX_ACCEL_BIAS_MPS2 = 1.0
+"""A track with an IMU fails when its estimated accelerometer bias exceeds this (m/s^2; a
+MEMS accelerometer's is ~0.1; the real deck log's 0.017, the same log's accelerometer read
+in g instead of m/s^2 9.5: the bias took up gravity's missing part)."""
 
 
 def residual_statistics(res: Residuals) -> dict[str, Any]:
@@ -108,6 +112,9 @@ class Verdict:
 
     status: str
     reasons: list[str]
+    residual_spread_urad: float | None = None
+    """The robust spread (1.4826 MAD) of the result's residuals: what a later track through
+    these stations is measured against (:func:`track_verdict`)."""
 
     @property
     def ok(self) -> bool:
@@ -125,7 +132,11 @@ class Verdict:
 
     def as_dict(self) -> dict[str, Any]:
         """The ``verdict`` table of summary.json and the result TOML (docs/workflow.md)."""
-        return {"status": self.status, "text": self.text(), "reasons": list(self.reasons)}
+        table: dict[str, Any] = {"status": self.status, "text": self.text(),
+                                 "reasons": list(self.reasons)}
+        if self.residual_spread_urad is not None:
+            table["residual_spread_urad"] = self.residual_spread_urad
+        return table
 
 
 def _not_converged(status: str, iterations: int | None) -> str:
@@ -173,7 +184,7 @@ def verdict(summary: dict[str, Any], coverages: dict[int, float] | None = None) 
             reasons.append(f"station {k}: the board covered only {100 * c:.0f} % of its view "
                            "(move it through more of the view)")
     status = "failed" if failures else "check" if reasons else "ok"
-    return Verdict(status, failures + reasons)
+    return Verdict(status, failures + reasons, res.get("robust_sigma_urad"))
 
 
 def result_verdict(result: SolveResult, angles: Angles) -> Verdict:
@@ -189,35 +200,49 @@ def result_verdict(result: SolveResult, angles: Angles) -> Verdict:
 
 
 def track_verdict(status: str, iterations: int, residuals: Residuals, range_m: float,
-                  gravity_mps2: float | None = None) -> Verdict:
+                  gravity_mps2: float | None = None,
+                  calibration_spread_urad: float | None = None,
+                  accel_bias_mps2: float | None = None) -> Verdict:
     """The verdict on a track with the stations held fixed: failed when the optimiser did
     not converge, when the residuals' robust spread times the median station-board range
-    ``range_m`` exceeds :data:`MAX_TRACK_SPREAD_MM` or fewer than :data:`MIN_TRACK_INLIERS`
-    of the hits are inliers (the angles do not fit these stations), or, with an IMU
-    (``gravity_mps2``: the magnitude of the gravity the track estimated), when that gravity
-    is :data:`MAX_GRAVITY_ERROR` off 1 g; to be checked when more than
+    ``range_m`` exceeds :data:`MAX_TRACK_SPREAD_MM`, when the spread exceeds
+    :data:`MAX_SPREAD_RATIO` times the stations' own calibration's
+    (``calibration_spread_urad``, from the stations TOML's ``verdict``), or fewer than
+    :data:`MIN_TRACK_INLIERS` of the hits are inliers (the angles do not fit these
+    stations), or, with an IMU (``gravity_mps2``, ``accel_bias_mps2``: the magnitudes of
+    the gravity and the accelerometer bias the track estimated), when that gravity is
+    :data:`MAX_GRAVITY_ERROR` off 1 g or the bias exceeds :data:`MAX_ACCEL_BIAS_MPS2` (the
+    accelerometer's unit or scale is wrong); to be checked when more than
     :data:`MAX_OUTLIER_FRACTION` of the hits are outliers."""
     failures, checks = [], []
     if status != "converged":
         failures.append(_not_converged(status, iterations))
-    spread_mm = robust_sigma(residuals.residual_rad) * range_m * 1e3
+    spread_urad = robust_sigma(residuals.residual_rad) * 1e6
+    spread_mm = spread_urad * range_m * 1e-3
     inliers = residuals.inlier_fraction()
     imu = "" if gravity_mps2 is None else ", or the IMU pulled the path off the light"
-    if spread_mm > MAX_TRACK_SPREAD_MM or inliers < MIN_TRACK_INLIERS:
+    over = (calibration_spread_urad is not None
+            and spread_urad > MAX_SPREAD_RATIO * calibration_spread_urad)
+    if spread_mm > MAX_TRACK_SPREAD_MM or inliers < MIN_TRACK_INLIERS or over:
+        against = ("" if calibration_spread_urad is None else
+                   f", {spread_urad / calibration_spread_urad:.1f} x the calibration's "
+                   f"{calibration_spread_urad:.0f} µrad")
         failures.append(
-            f"the angles do not fit these stations: residuals spread "
-            f"{robust_sigma(residuals.residual_rad) * 1e6:.0f} µrad ({spread_mm:.1f} mm at the "
-            f"median range {range_m:.1f} m; limit {MAX_TRACK_SPREAD_MM:g} mm), "
+            f"the angles do not fit these stations: residuals spread {spread_urad:.0f} µrad "
+            f"({spread_mm:.2f} mm at the median range {range_m:.1f} m{against}), "
             f"{100 * inliers:.0f} % inliers: stations of another room or moved since their "
             f"calibration, or a factory calibration of other stations{imu}")
     elif 1 - inliers > MAX_OUTLIER_FRACTION:
         checks.append(f"{100 * (1 - inliers):.1f} % of the hits are outliers (more than "
                       f"{100 * MAX_OUTLIER_FRACTION:.0f} %): reflections, or board poses the "
                       "light cannot tell from their mirror image")
+    unit = "the accelerometer's unit or scale is wrong (imu.csv must be in m/s^2, not g)"
     if gravity_mps2 is not None and abs(gravity_mps2 / STANDARD_GRAVITY_MPS2 - 1) > (
             MAX_GRAVITY_ERROR):
         failures.append(f"the track's gravity is {gravity_mps2:.2f} m/s^2, not "
-                        f"{STANDARD_GRAVITY_MPS2:.2f}: the accelerometer's unit or scale is "
-                        "wrong (imu.csv must be in m/s^2, not g)")
+                        f"{STANDARD_GRAVITY_MPS2:.2f}: {unit}")
+    if accel_bias_mps2 is not None and accel_bias_mps2 > MAX_ACCEL_BIAS_MPS2:
+        failures.append(f"the track's accelerometer bias is {accel_bias_mps2:.2f} m/s^2 "
+                        f"(more than {MAX_ACCEL_BIAS_MPS2:g}): {unit}")
     status_out = "failed" if failures else "check" if checks else "ok"
     return Verdict(status_out, failures + checks)
