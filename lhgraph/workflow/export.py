@@ -25,6 +25,7 @@ from lhgraph.estimation.world_alignment import (
     WorldAlignment,
     WorldOptions,
     align_world,
+    still_mask,
     transform_stations,
     up_from_imu,
     up_from_ootx,
@@ -35,6 +36,10 @@ from lhgraph.io.imu import ImuStream, load_imu
 from lhgraph.io.stations import Stations, load_stations
 from lhgraph.io.trajectory import Trajectory, load_trajectory
 from lhgraph.model.calibration import StationCalibration, load_calibration
+
+MAX_REST_TILT_DEG = 5.0
+"""The receiver at rest at the receiver-start: its accelerometer through the trajectory's
+pose within this of the new world's up (deg)."""
 
 
 @dataclass(frozen=True)
@@ -140,6 +145,34 @@ def verdict_warnings(stations: Stations, stations_path: str | Path, unverified: 
     return [f"exporting a result whose verdict is {text}"]
 
 
+def check_resting_start(imu: ImuStream, trajectory: Trajectory, alignment: WorldAlignment,
+                        options: WorldOptions) -> None:
+    """cfclient's convention (``receiver-start``): the receiver rests on the floor at the
+    origin at ``alignment.at_s``. InputError when the IMU shows it moving there (the origin
+    would be wherever it was carried, e.g. 1.1 m above the floor on the shared hand-held
+    LH1 log) or when its accelerometer at rest, through the trajectory's pose, is more than
+    :data:`MAX_REST_TILT_DEG` from the new world's up (the tracked pose is flipped)."""
+    at = float(alignment.at_s)  # type: ignore[arg-type]
+    near = np.abs(imu.time - at) <= 0.5 * options.still_window_s
+    still = still_mask(imu.time, imu.accel_mps2, imu.gyro_rad_s, options)
+    if not np.any(near) or not np.all(still[near]):
+        raise InputError(
+            f"the receiver is moving at t = {at:.3f} s (its IMU shows no rest there): "
+            "receiver-start puts cfclient's origin where the receiver is, which cfclient "
+            "takes to be resting on the floor; give --at S of a moment it rests on the floor "
+            "at the origin, or --origin/--x reference-station or world")
+    R = trajectory.at(imu.time[near])[:, :3, :3]
+    f = np.einsum("nij,nj->ni", R, imu.accel_mps2[near]).mean(axis=0)
+    up_w = alignment.T_new_w[2, :3]
+    tilt = float(np.degrees(np.arccos(np.clip(f @ up_w / np.linalg.norm(f), -1.0, 1.0))))
+    if tilt > MAX_REST_TILT_DEG:
+        raise InputError(
+            f"at rest (t = {at:.3f} s) the trajectory's pose puts the accelerometer's gravity "
+            f"{tilt:.1f} deg from up (more than {MAX_REST_TILT_DEG:g}): the tracked pose there "
+            "is wrong (a mirror pose of a few-diode receiver's light-only track?): track it "
+            "with --imu")
+
+
 def _up(options: WorldOptions, stations: Stations,
         calibrations: dict[int, StationCalibration] | None, imu: ImuStream | None,
         trajectory: Trajectory | None) -> UpEstimate:
@@ -195,6 +228,8 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
                          imu)
     up = _up(options, stations, calibrations, stream, path_poses)
     alignment = align_world(stations, up, path_poses, options)
+    if stream is not None and path_poses is not None and alignment.at_s is not None:
+        check_resting_start(stream, path_poses, alignment, options)
     moved = transform_stations(stations, alignment.T_new_w)
     calibs, warnings = ({}, []) if calibrations is None else _calibrations_of(
         stations, calibrations)
@@ -202,4 +237,4 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
     path = write_system_config(config, output, overwrite)
     moved = dataclasses.replace(moved, extra={**moved.extra, "world": "cfclient"})
     return ExportResult(path, config, moved, alignment,
-                        tuple(verdict_notes + warnings) + alignment.warnings)
+                        tuple(verdict_notes + warnings))
