@@ -351,9 +351,13 @@ def test_export_in_the_imu_world(tmp_path):
 def test_receiver_start_puts_the_receiver_at_the_origin(tmp_path):
     stations, ootx = _write_setup(tmp_path)
     _, trajectory, traj = _hand_held(tmp_path)
+    # cfclient's origin is the receiver resting on the floor: not while it is waved
+    with pytest.raises(InputError, match="moving at t = 10.000 s"):
+        export_cfclient(stations, tmp_path / "a.yaml", imu=tmp_path / "imu.csv",
+                        trajectory=trajectory, options=WorldOptions(at_s=10.0))
     result = export_cfclient(stations, tmp_path / "a.yaml", imu=tmp_path / "imu.csv",
-                             trajectory=trajectory, options=WorldOptions(at_s=10.0))
-    T = result.alignment.T_new_w @ traj.at(np.array([10.0]))[0]
+                             trajectory=trajectory, options=WorldOptions(at_s=1.0))
+    T = result.alignment.T_new_w @ traj.at(np.array([1.0]))[0]
     np.testing.assert_allclose(T[:3, 3], 0.0, atol=1e-9)
     assert abs(T[1, 0]) < 1e-9 and T[0, 0] > 0  # receiver's x: the world's +x, tilted only
     assert result.alignment.origin == result.alignment.x == "receiver-start"
@@ -435,7 +439,7 @@ def test_an_imu_in_the_wrong_frame_is_flagged(tmp_path):
         "time": stream[:, 0], "ax": stream[:, 3], "ay": stream[:, 2], "az": -stream[:, 1]},
         {}, False)
     # (samples at rest in one orientation cannot reveal a wrong frame: the motion can)
-    result = export_cfclient(stations, tmp_path / "a.yaml", imu=turned, trajectory=trajectory,
-                             options=WorldOptions(imu_samples="all"))
-    assert result.alignment.up.consistency < 0.9
-    assert any("agree poorly" in w for w in result.warnings)
+    with pytest.raises(InputError, match="agree poorly .* track it with --imu"):
+        export_cfclient(stations, tmp_path / "a.yaml", imu=turned, trajectory=trajectory,
+                        options=WorldOptions(imu_samples="all"))
+    assert not (tmp_path / "a.yaml").exists()

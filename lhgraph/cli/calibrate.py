@@ -11,7 +11,9 @@ from lhgraph.cli.common import (
     add_verbose,
     at_least,
     mark_inputs,
+    print_verdict,
     progress_printer,
+    verdict_exit,
 )
 
 # --- simulate ---
@@ -100,7 +102,12 @@ def run_solve(args: argparse.Namespace) -> int:
     from lhgraph.errors import InputError
     from lhgraph.report.text import format_comparison, print_solution
     from lhgraph.workflow.inputs import calibration_beside
-    from lhgraph.workflow.rundir import comparison_rows, is_run_directory, run_to_directory
+    from lhgraph.workflow.rundir import (
+        comparison_rows,
+        is_run_directory,
+        run_to_directory,
+        run_verdict,
+    )
     from lhgraph.workflow.solve import solve_to_files
     from lhgraph.workflow.solve_config import SolveConfig, load_solve_config
 
@@ -133,19 +140,24 @@ def run_solve(args: argparse.Namespace) -> int:
                                                                     flush=True))
         run = run_to_directory(config, config.output, args.force, progress, args.resume,
                                shown)
+        if not args.quiet and len(run.runs) > 1:
+            print(format_comparison(comparison_rows(run.runs)))
+        verdicts = {r.method: run_verdict(r.summary) for r in run.runs}
+        for method, v in verdicts.items():
+            print_verdict(args, v, method if len(verdicts) > 1 else "")
         if not args.quiet:
-            if len(run.runs) > 1:
-                print(format_comparison(comparison_rows(run.runs)))
             print(f"wrote {len(run.files)} files to {run.directory}; report: {run.report}")
-        return 0
+        return verdict_exit(verdicts.values())
     if args.resume:
         raise InputError("--resume is for a run directory output (a CONFIG and an output "
                          "without .toml)", config.output)
-    result, errors, written = solve_to_files(config, args.force, progress)
+    result, errors, written, verdict = solve_to_files(config, args.force, progress)
     if not args.quiet:
         print_solution(result, errors)
+    print_verdict(args, verdict)
+    if not args.quiet:
         print(f"wrote {', '.join(str(p) for p in written)}")
-    return 0
+    return verdict_exit([verdict])
 
 
 COMMANDS.append(("solve", add_solve, run_solve))

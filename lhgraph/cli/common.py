@@ -10,7 +10,11 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from lhgraph.report.assessment import Verdict
 
 Runner = Callable[[argparse.Namespace], int]
 Adder = Callable[[argparse._SubParsersAction], argparse.ArgumentParser]
@@ -99,3 +103,21 @@ def progress_printer(args: argparse.Namespace) -> Callable[[str], None] | None:
 
     return PlainProgress(lambda msg: print(f"  {msg}", file=sys.stderr),
                          getattr(args, "verbose", False))
+
+
+def print_verdict(args: argparse.Namespace, verdict: Verdict, label: str = "") -> None:
+    """The verdict line (``verdict: OK``, ``verdict: check: ...``, ``verdict: FAILED: ...``)
+    on stdout; with ``--quiet`` only a failed one, on stderr."""
+    line = f"verdict{' ' + label if label else ''}: {verdict.text()}"
+    if not args.quiet:
+        print(line)
+    elif verdict.failed:
+        print(f"lhgraph {args.command}: {line}", file=sys.stderr)
+
+
+def verdict_exit(verdicts: Iterable[Verdict]) -> int:
+    """The exit code of a command that ends with verdicts: 3 (the code of
+    :class:`~lhgraph.errors.SolverError`) when any failed, else 0 (docs/cli.md)."""
+    from lhgraph.errors import SolverError
+
+    return SolverError.exit_code if any(v.failed for v in verdicts) else 0

@@ -98,6 +98,8 @@ def add_export(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                           ("--origin", EXPORT_FRAMES), ("--x", EXPORT_FRAMES)):
         p.add_argument(flag, choices=choices, default="auto", help="docs/export.md")
     p.add_argument("--at", type=float, metavar="S", help="time of the receiver-start pose")
+    p.add_argument("--force-unverified", action="store_true",
+                   help="export a result whose verdict failed (e.g. an unconverged solve)")
     add_common_output(p)
     mark_inputs(p, "stations", "calibration", "imu", "trajectory")
     p.set_defaults(_export=_run_export_cfclient)
@@ -114,7 +116,7 @@ def _run_export_cfclient(args: argparse.Namespace) -> int:
                        | {"--at": ("at_s", args.at)})
     result = export_cfclient(args.stations, args.output, calibration=args.calibration,
                              imu=args.imu, trajectory=args.trajectory, options=options,
-                             overwrite=args.force)
+                             overwrite=args.force, unverified=args.force_unverified)
     for warning in result.warnings:
         print(f"lhgraph export: warning: {warning}", file=sys.stderr)
     if not args.quiet:

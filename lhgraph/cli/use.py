@@ -6,7 +6,13 @@ import argparse
 import sys
 
 from lhgraph.choices import RENDERERS
-from lhgraph.cli.common import COMMANDS, add_common_output, mark_inputs
+from lhgraph.cli.common import (
+    COMMANDS,
+    add_common_output,
+    mark_inputs,
+    print_verdict,
+    verdict_exit,
+)
 
 # --- track ---
 
@@ -42,7 +48,10 @@ def run_track(args: argparse.Namespace) -> int:
                       imu=args.imu)
     if not args.quiet:
         print(out.summary())
-    return 0
+    if out.verdict is None:
+        return 0
+    print_verdict(args, out.verdict)
+    return verdict_exit([out.verdict])
 
 
 COMMANDS.append(("track", add_track, run_track))

@@ -49,7 +49,7 @@ from lhgraph.model.calibration import StationCalibration
 Array = NDArray[np.float64]
 
 MIN_CONSISTENCY = 0.9
-"""Below this |mean of R f| / 1 g the IMU-derived up is flagged as unreliable."""
+"""Below this |mean of R f| / 1 g the IMU-derived up is refused as unreliable."""
 
 
 @dataclass(frozen=True)
@@ -111,7 +111,6 @@ class WorldAlignment:
     origin: str
     x: str
     at_s: float | None
-    warnings: tuple[str, ...] = ()
 
     def summary(self) -> str:
         """One line: what the new world is."""
@@ -233,13 +232,14 @@ def align_world(stations: Stations, up: UpEstimate, trajectory: Trajectory | Non
     p0 = frames[origin][:3, 3]
     x = _horizontal(frames[x_name][:3, 0], z, f"the {x_name} x axis")
     R_new_w = np.stack([x, np.cross(z, x), z])
-    warnings = []
     if up.source == "imu" and up.consistency < MIN_CONSISTENCY:
-        warnings.append(f"the IMU and the trajectory agree poorly (consistency "
-                        f"{up.consistency:.2f} < {MIN_CONSISTENCY}): check the IMU's frame and "
-                        "clock")
-    return WorldAlignment(make_pose(R_new_w, -R_new_w @ p0), up, origin, x_name, at_s,
-                          tuple(warnings))
+        raise InputError(
+            f"the IMU and the trajectory agree poorly (consistency {up.consistency:.2f} < "
+            f"{MIN_CONSISTENCY}): up from them is not reliable. Either the trajectory's "
+            "orientations are wrong (a light-only track of a few-diode receiver such as the "
+            "Crazyflie deck turns poses into their mirror image: track it with --imu) or the "
+            "IMU's frame or clock is not the trajectory's; or choose --up ootx / none")
+    return WorldAlignment(make_pose(R_new_w, -R_new_w @ p0), up, origin, x_name, at_s)
 
 
 def transform_stations(stations: Stations, T_new_w: Array) -> Stations:

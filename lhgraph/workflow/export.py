@@ -18,13 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from lhgraph.errors import InputError
+from lhgraph.errors import InputError, SolverError
 from lhgraph.estimation.world_alignment import (
     STANDARD_GRAVITY_MPS2,
     UpEstimate,
     WorldAlignment,
     WorldOptions,
     align_world,
+    still_mask,
     transform_stations,
     up_from_imu,
     up_from_ootx,
@@ -35,6 +36,10 @@ from lhgraph.io.imu import ImuStream, load_imu
 from lhgraph.io.stations import Stations, load_stations
 from lhgraph.io.trajectory import Trajectory, load_trajectory
 from lhgraph.model.calibration import StationCalibration, load_calibration
+
+MAX_REST_TILT_DEG = 5.0
+"""The receiver at rest at the receiver-start: its accelerometer through the trajectory's
+pose within this of the new world's up (deg)."""
 
 
 @dataclass(frozen=True)
@@ -124,6 +129,50 @@ def system_type(stations: Stations, stations_path: str | Path,
     return generation
 
 
+def verdict_warnings(stations: Stations, stations_path: str | Path, unverified: bool
+                     ) -> list[str]:
+    """What the stations file's ``verdict`` table (a ``lhgraph solve`` result's) says about
+    exporting it: SolverError (exit 3) for a failed result unless ``unverified``; a warning
+    for a failed one exported anyway and for one to be checked; nothing for a file without a
+    verdict (a truth file, cfclient's geometry) or an OK one."""
+    table = stations.extra.get("verdict")
+    if not isinstance(table, dict) or table.get("status") in (None, "ok"):
+        return []
+    text = str(table.get("text") or table.get("status"))
+    if table.get("status") == "failed" and not unverified:
+        raise SolverError(f"{stations_path}: the result's verdict is {text}; solve again, or "
+                          "export it anyway with --force-unverified")
+    return [f"exporting a result whose verdict is {text}"]
+
+
+def check_resting_start(imu: ImuStream, trajectory: Trajectory, alignment: WorldAlignment,
+                        options: WorldOptions) -> None:
+    """cfclient's convention (``receiver-start``): the receiver rests on the floor at the
+    origin at ``alignment.at_s``. InputError when the IMU shows it moving there (the origin
+    would be wherever it was carried, e.g. 1.1 m above the floor on the shared hand-held
+    LH1 log) or when its accelerometer at rest, through the trajectory's pose, is more than
+    :data:`MAX_REST_TILT_DEG` from the new world's up (the tracked pose is flipped)."""
+    at = float(alignment.at_s)  # type: ignore[arg-type]
+    near = np.abs(imu.time - at) <= 0.5 * options.still_window_s
+    still = still_mask(imu.time, imu.accel_mps2, imu.gyro_rad_s, options)
+    if not np.any(near) or not np.all(still[near]):
+        raise InputError(
+            f"the receiver is moving at t = {at:.3f} s (its IMU shows no rest there): "
+            "receiver-start puts cfclient's origin where the receiver is, which cfclient "
+            "takes to be resting on the floor; give --at S of a moment it rests on the floor "
+            "at the origin, or --origin/--x reference-station or world")
+    R = trajectory.at(imu.time[near])[:, :3, :3]
+    f = np.einsum("nij,nj->ni", R, imu.accel_mps2[near]).mean(axis=0)
+    up_w = alignment.T_new_w[2, :3]
+    tilt = float(np.degrees(np.arccos(np.clip(f @ up_w / np.linalg.norm(f), -1.0, 1.0))))
+    if tilt > MAX_REST_TILT_DEG:
+        raise InputError(
+            f"at rest (t = {at:.3f} s) the trajectory's pose puts the accelerometer's gravity "
+            f"{tilt:.1f} deg from up (more than {MAX_REST_TILT_DEG:g}): the tracked pose there "
+            "is wrong (a mirror pose of a few-diode receiver's light-only track?): track it "
+            "with --imu")
+
+
 def _up(options: WorldOptions, stations: Stations,
         calibrations: dict[int, StationCalibration] | None, imu: ImuStream | None,
         trajectory: Trajectory | None) -> UpEstimate:
@@ -149,7 +198,7 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
                     calibration: str | Path | None = None, imu: str | Path | None = None,
                     trajectory: str | Path | None = None,
                     options: WorldOptions | None = None,
-                    overwrite: bool = False) -> ExportResult:
+                    overwrite: bool = False, unverified: bool = False) -> ExportResult:
     """Write ``stations_path`` (a stations TOML, LH1 or LH2: :func:`system_type`) as
     cfclient's ``system-config.yaml``.
 
@@ -159,6 +208,8 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
     ``lhgraph track``): the receiver's data for ``up = imu`` and the receiver-start choices.
     The calibration's terms are written through the mapping of the system type
     (:data:`lhgraph.io.cfclient.CALIBRATION_MAPPINGS`; LH2: Bitcraze's terms are ours).
+    A result whose ``verdict`` failed (e.g. a solve stopped at its iteration limit) is
+    refused unless ``unverified`` (:func:`verdict_warnings`).
     """
     options = options or WorldOptions()
     output = check_writable(output, overwrite, create_parents=False)
@@ -166,6 +217,7 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
         raise InputError("--imu needs --trajectory: the receiver's poses carry its "
                          "accelerometer into the stations' world")
     stations = load_stations(stations_path)
+    verdict_notes = verdict_warnings(stations, stations_path, unverified)
     calibrations = None if calibration is None else load_calibration(calibration)
     system = system_type(stations, stations_path, calibrations, calibration)
     stream = None if imu is None else load_imu(imu)
@@ -176,6 +228,8 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
                          imu)
     up = _up(options, stations, calibrations, stream, path_poses)
     alignment = align_world(stations, up, path_poses, options)
+    if stream is not None and path_poses is not None and alignment.at_s is not None:
+        check_resting_start(stream, path_poses, alignment, options)
     moved = transform_stations(stations, alignment.T_new_w)
     calibs, warnings = ({}, []) if calibrations is None else _calibrations_of(
         stations, calibrations)
@@ -183,4 +237,4 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
     path = write_system_config(config, output, overwrite)
     moved = dataclasses.replace(moved, extra={**moved.extra, "world": "cfclient"})
     return ExportResult(path, config, moved, alignment,
-                        tuple(warnings) + alignment.warnings)
+                        tuple(verdict_notes + warnings))

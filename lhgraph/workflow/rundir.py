@@ -28,15 +28,20 @@ import numpy as np
 from lhgraph.errors import InputError
 from lhgraph.estimation.metrics import PoseError, station_errors
 from lhgraph.estimation.result import Residuals, SolveResult
-from lhgraph.estimation.spread import robust_sigma
 from lhgraph.geometry.transforms import euler_zyx, matrix_to_quat
 from lhgraph.io.files import check_writable, read_json_object, write_atomic, write_csv_columns
 from lhgraph.io.stations import Stations, load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
 from lhgraph.model.board import save_board, with_sensor_offsets
-from lhgraph.report.assessment import coverage, view_points
+from lhgraph.report.assessment import (
+    Verdict,
+    coverage,
+    residual_statistics,
+    verdict,
+    view_points,
+)
 from lhgraph.workflow.inputs import SolveInputs, check_inputs, load_inputs
-from lhgraph.workflow.solve import solve
+from lhgraph.workflow.solve import solve, with_verdict
 from lhgraph.workflow.solve_config import SolveConfig
 
 RUN_FILES = ("stations.toml", "trajectory.csv", "residuals.csv", "summary.json", "report.html")
@@ -105,28 +110,6 @@ def input_files(config: SolveConfig) -> dict[str, Path]:
     return {k: Path(v) for k, v in named.items() if v is not None}
 
 
-def residual_statistics(res: Residuals) -> dict[str, Any]:
-    """Counts, inlier rms, median |residual| and robust spread 1.4826 MAD (µrad), overall
-    and per station/axis."""
-
-    def stats(mask: np.ndarray) -> dict[str, Any]:
-        r, w = res.residual_rad[mask], res.weight[mask]
-        inl = r[w > 0.5]
-        return {"hits": int(mask.sum()),
-                "inlier_fraction": float(np.mean(w > 0.5)) if len(w) else None,
-                "rms_urad": float(np.sqrt(np.mean(inl**2)) * 1e6) if len(inl) else None,
-                "median_abs_urad": float(np.median(np.abs(r)) * 1e6) if len(r) else None,
-                "robust_sigma_urad": robust_sigma(r) * 1e6 if len(r) else None,
-                "max_abs_urad": float(np.max(np.abs(r)) * 1e6) if len(r) else None}
-
-    out = stats(np.ones(len(res.residual_rad), dtype=bool))
-    out["per_station_axis"] = {
-        f"{lh}/{ax}": stats((res.lighthouse == lh) & (res.axis == ax))
-        for lh in np.unique(res.lighthouse) for ax in (0, 1)
-        if np.any((res.lighthouse == lh) & (res.axis == ax))}
-    return out
-
-
 def station_summary(stations: Stations) -> dict[str, Any]:
     """Pose (m, quaternion wxyz, ZYX Euler roll/pitch/yaw deg) and 1-sigma of every station:
     body-frame (mm, deg) and in the printed axes (world x, y, z mm; roll, pitch, yaw deg)."""
@@ -189,7 +172,7 @@ def summarise(config: SolveConfig, inputs: SolveInputs, result: SolveResult,
               errors: list[PoseError] | None, hashes: dict[str, dict[str, str]],
               load_s: float) -> dict[str, Any]:
     """The ``summary.json`` document of one method's run (docs/workflow.md)."""
-    return _json_safe({
+    summary = _json_safe({
         "method": result.method,
         "status": result.status,
         "iterations": result.iterations,
@@ -215,6 +198,14 @@ def summarise(config: SolveConfig, inputs: SolveInputs, result: SolveResult,
         "decode": inputs.notes,
         "resume_key": resume_key(config, result.method, hashes),
     })
+    summary["verdict"] = run_verdict(summary).as_dict()
+    return summary
+
+
+def run_verdict(summary: dict[str, Any]) -> Verdict:
+    """The verdict on one method's run from its ``summary.json`` document (also one written
+    before the document held its ``verdict``)."""
+    return verdict(summary, {int(k): v for k, v in (summary.get("coverage") or {}).items()})
 
 
 def resume_key(config: SolveConfig, method: str, hashes: dict[str, dict[str, str]]) -> str:
@@ -363,7 +354,8 @@ def _run_method(config: SolveConfig, inputs: SolveInputs, method: str, folder: P
                    world_up=inputs.world_up, imu=inputs.imu)
     errors = station_errors(truth, result.stations) if truth is not None else None
     summary = summarise(config, inputs, result, errors, hashes, load_s)
-    files.append(save_stations(result.stations, folder / "stations.toml", overwrite))
+    files.append(save_stations(with_verdict(result.stations, run_verdict(summary)),
+                               folder / "stations.toml", overwrite))
     if result.trajectory is not None:
         files.append(save_trajectory(result.trajectory, folder / "trajectory.csv", overwrite))
     if result.sensor_offset_m is not None:

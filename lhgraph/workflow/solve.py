@@ -27,10 +27,11 @@ from lhgraph.estimation.result import SolveResult
 from lhgraph.io.angles import Angles
 from lhgraph.io.files import check_writable
 from lhgraph.io.imu import ImuStream
-from lhgraph.io.stations import load_stations, save_stations
+from lhgraph.io.stations import Stations, load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
 from lhgraph.model.board import Board, save_board, with_sensor_offsets
 from lhgraph.model.station import StationModel
+from lhgraph.report.assessment import Verdict, result_verdict
 from lhgraph.workflow.inputs import SolveInputs, check_inputs, load_inputs
 from lhgraph.workflow.solve_config import SolveConfig
 
@@ -94,10 +95,18 @@ def solve(board: Board, angles: Angles, method: str = "graph",
     return dataclasses.replace(aligned, diagnostics={**aligned.diagnostics, **compared})
 
 
+def with_verdict(stations: Stations, verdict: Verdict) -> Stations:
+    """``stations`` with the result's ``verdict`` table (:meth:`Verdict.as_dict`, written
+    into the stations TOML, docs/formats.md; ``lhgraph export`` refuses a failed one)."""
+    return dataclasses.replace(stations, extra={**stations.extra, "verdict": verdict.as_dict()})
+
+
 def write_solution(result: SolveResult, output: str | Path, trajectory: str | Path | None,
-                   overwrite: bool) -> list[Path]:
-    """Write the stations TOML (and the board trajectory CSV when asked)."""
-    written = [save_stations(result.stations, output, overwrite)]
+                   overwrite: bool, verdict: Verdict | None = None) -> list[Path]:
+    """Write the stations TOML (with ``verdict`` when given) and the board trajectory CSV
+    when asked."""
+    stations = result.stations if verdict is None else with_verdict(result.stations, verdict)
+    written = [save_stations(stations, output, overwrite)]
     if trajectory is not None and result.trajectory is not None:
         written.append(save_trajectory(result.trajectory, trajectory, overwrite))
     return written
@@ -114,11 +123,13 @@ def run_config(config: SolveConfig, progress: Callable[[str], None] | None = Non
 
 def solve_to_files(config: SolveConfig, overwrite: bool = False,
                    progress: Callable[[str], None] | None = None
-                   ) -> tuple[SolveResult, list[PoseError] | None, list[Path]]:
+                   ) -> tuple[SolveResult, list[PoseError] | None, list[Path], Verdict]:
     """Solve a one-method config into its ``output`` stations TOML (and ``trajectory``).
 
     Inputs and output targets are checked before solving (InputError, nothing written).
-    Returns the result, its errors against ``truth`` (when given) and the files written.
+    Returns the result, its errors against ``truth`` (when given), the files written and the
+    result's verdict (:func:`lhgraph.report.assessment.result_verdict`, also written into the
+    stations TOML).
     """
     if config.output is None:
         raise InputError("no output: give --output or set 'output' in the config")
@@ -139,9 +150,10 @@ def solve_to_files(config: SolveConfig, overwrite: bool = False,
     truth = load_stations(config.truth) if config.truth else None
     inputs = load_inputs(config)
     result = run_config(config, progress, inputs)
-    written = write_solution(result, config.output, config.trajectory, overwrite)
+    verdict = result_verdict(result, inputs.angles)
+    written = write_solution(result, config.output, config.trajectory, overwrite, verdict)
     if config.board_output is not None:
         board = with_sensor_offsets(inputs.board, result.sensor_offset_m)
         written.append(save_board(board, config.board_output, overwrite))
     errors = station_errors(truth, result.stations) if truth else None
-    return result, errors, written
+    return result, errors, written, verdict

@@ -5,7 +5,8 @@ trajectory CSV (docs/track.md).
 file, nothing written), tracks in batch (:func:`lhgraph.estimation.graph.track.track`) or one
 sync cycle at a time (:func:`lhgraph.estimation.graph.streaming.track_stream`) and writes the
 contract trajectory CSV with the added columns ``lighthouse``, ``hits``, ``sigma_m``
-atomically.
+atomically. A batch track ends with a verdict on its residuals
+(:func:`lhgraph.report.assessment.track_verdict`): the angles fit the stations, or not.
 """
 
 from __future__ import annotations
@@ -20,12 +21,15 @@ from lhgraph.errors import InputError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.streaming import DELAY_S, track_stream
 from lhgraph.estimation.graph.track import TrackedPath, track
+from lhgraph.estimation.result import Residuals
+from lhgraph.estimation.spread import robust_sigma
 from lhgraph.io.angles import load_angles
 from lhgraph.io.files import check_writable
 from lhgraph.io.imu import load_imu
-from lhgraph.io.stations import load_stations
+from lhgraph.io.stations import Stations, load_stations
 from lhgraph.io.trajectory import save_trajectory
 from lhgraph.model.boards import board_by_name
+from lhgraph.report.assessment import Verdict, track_verdict
 from lhgraph.workflow.inputs import calibration_beside, check_generations, station_models
 
 Progress = Callable[[str], None]
@@ -41,15 +45,27 @@ class TrackOutput:
     streaming: bool
     cycle_s: list[float]
     status: str
+    residuals: Residuals | None = None
+    range_m: float = float("nan")
+    verdict: Verdict | None = None
 
     def summary(self) -> str:
-        """One line: states, time span, how well determined, what was written."""
+        """States, time span, how well determined, what was written; batch: the residuals
+        (rms of the inliers, robust spread, also as mm at the median station-board range)."""
         t = self.path.trajectory.time
         sigma = np.median(self.path.sigma_m) * 1e3
         how = (f"streaming, {len(self.cycle_s)} cycles, median update "
                f"{np.median(self.cycle_s) * 1e3:.1f} ms" if self.streaming else self.status)
-        return (f"{len(t)} board states over {t[-1] - t[0]:.1f} s ({how}), median position "
-                f"sigma {sigma:.2f} mm; wrote {self.written}")
+        lines = [f"{len(t)} board states over {t[-1] - t[0]:.1f} s ({how}), median position "
+                 f"sigma {sigma:.2f} mm; wrote {self.written}"]
+        if self.residuals is not None:
+            r = self.residuals
+            spread = robust_sigma(r.residual_rad)
+            lines.append(f"residuals: {len(r.residual_rad)} hits, rms {r.rms_urad():.1f} µrad "
+                         f"(inliers), robust spread {spread * 1e6:.1f} µrad = "
+                         f"{spread * self.range_m * 1e3:.2f} mm at the median range "
+                         f"{self.range_m:.2f} m, inlier fraction {r.inlier_fraction():.3f}")
+        return "\n".join(lines)
 
 
 def track_files(board: str | Path, angles: str | Path, stations: str | Path, output: str | Path,
@@ -107,4 +123,20 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
                        imu=stream)
         path, cycle_s, status = result.path, [], result.status
     written = save_trajectory(path.trajectory, output, overwrite, path.columns())
-    return TrackOutput(path, written, streaming, cycle_s, status)
+    if streaming:
+        return TrackOutput(path, written, streaming, cycle_s, status)
+    range_m = median_range(path, fixed)
+    gravity = None if result.gravity is None else float(np.linalg.norm(result.gravity))
+    bias = None if result.imu_bias is None else float(np.linalg.norm(result.imu_bias[3:]))
+    calibrated = (fixed.extra.get("verdict") or {}).get("residual_spread_urad")
+    return TrackOutput(path, written, streaming, cycle_s, status, result.residuals, range_m,
+                       track_verdict(status, result.iterations, result.residuals, range_m,
+                                     gravity, calibrated, bias))
+
+
+def median_range(path: TrackedPath, stations: Stations) -> float:
+    """Median distance (m) from each state's board position to the station whose sweep made
+    it: what turns an angle residual into a distance."""
+    p_lh = np.stack([stations.pose(int(k))[:3, 3] for k in path.lighthouse])
+    return float(np.median(np.linalg.norm(path.trajectory.T_world_board[:, :3, 3] - p_lh,
+                                          axis=1)))

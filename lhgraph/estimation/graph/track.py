@@ -46,6 +46,7 @@ from lhgraph.estimation.init.pnp_kabsch import (
 )
 from lhgraph.estimation.problem import GraphProblem, build_problem, expand_ranges
 from lhgraph.estimation.residuals import BearingHits, bearing_residuals
+from lhgraph.estimation.result import Residuals
 from lhgraph.estimation.spread import robust_sigma
 from lhgraph.geometry.transforms import se3_exp
 from lhgraph.io.angles import Angles
@@ -106,7 +107,8 @@ class TrackResult:
     few-diode data, which starts from planar twins); the
     optimiser's status and iterations; timings (s); the learned noise levels; with an IMU
     its estimated ``imu_bias`` ``[gyro (rad/s), accelerometer (m/s^2)]`` (6,) and
-    ``gravity`` (3,) m/s^2 in the stations' world."""
+    ``gravity`` (3,) m/s^2 in the stations' world; the per-hit ``residuals`` of the light
+    at the result (measured - predicted angle, robust weights), as a solve's."""
 
     path: TrackedPath
     initialised: int
@@ -120,6 +122,7 @@ class TrackResult:
     """The options the track ran with, every choice resolved, by group."""
     option_rules: list[str] = field(default_factory=list)
     """One line per rule that changed the options given."""
+    residuals: Residuals | None = None
 
 
 def station_slot_poses(stations: Stations, station_ids: list[int]) -> Array:
@@ -292,4 +295,7 @@ def track(board: Board, angles: Angles, stations: Stations,
         gravity=ev.gravity(),
         options=options.nested(),
         option_rules=list(resolution.applied),
+        residuals=Residuals(angles.time[problem.hit_rows], angles.lighthouse[problem.hit_rows],
+                            problem.hits.axis, angles.sensor[problem.hit_rows],
+                            -ev.bearing.residuals(), ev.bearing.robust_weights()),
     )

@@ -1,0 +1,88 @@
+"""The documented Crazyflie workflow, end to end on every shared Bitcraze log
+(docs/crazyflie.md): ``import crazyflie`` -> ``solve`` -> ``track`` -> ``export cfclient
+--imu --trajectory``. Every solve and track prints its verdict; the export is z up with the
+stations within 50 mm of the heights in cfclient's own ``system-config.yaml``, or it is
+refused with the reason (a receiver that never rests on the floor at the origin, a track
+whose poses disagree with the accelerometer). The logs have no licence: read from
+``../shared``, skipped when absent. One import, solve and track per log (module fixture):
+about 15-40 s a log."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from lhgraph.cli import main
+from lhgraph.io.cfclient import read_system_config
+
+LOGS = {"lh1_move_log02": ("lh1_crossingBeam_move", "log02"),
+        "lh1_flight_log00": ("lh1_crossingBeam_flight", "log00"),
+        "lh2_move_log00": ("lh2_crossingBeam_move", "log00"),
+        "lh2_move_log01": ("lh2_crossingBeam_move", "log01")}
+HEIGHT_TOLERANCE_M = 0.05
+REFUSALS = ("is moving at t =", "agree poorly", "the tracked pose there is wrong")
+KNOWN_OFF = {"lh1_flight_log00": (
+    "z up from the deck resting on the floor, yet stations 82 / 170 mm below cfclient's: our "
+    "LH1 solves put the stations 4290 mm apart against cfclient's 4184 (2.5 %), and "
+    "cfclient's z (from its floor-plane samples) is ~0.9 deg from gravity (docs/export.md)")}
+
+
+def _run(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def workflows(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
+    return {}
+
+
+@pytest.fixture(params=sorted(LOGS))
+def workflow(request, workflows, shared_data: Path, tmp_path_factory, capsys) -> dict:
+    """Import, solve and track one log once (module-wide), keeping what each printed."""
+    name = request.param
+    if name in workflows:
+        return workflows[name]
+    folder, log = LOGS[name]
+    data = shared_data / "bitcraze-positioning" / folder
+    if not (data / log).is_file():
+        pytest.skip(f"shared Bitcraze log {folder}/{log} absent")
+    out = tmp_path_factory.mktemp(name)
+    assert _run(capsys, "import", "crazyflie", str(data / log), "--system-config",
+                str(data / "system-config.yaml"), "--output", str(out), "--quiet")[0] == 0
+    files = ["--board", str(out / "board.toml"), "--angles", str(out / "angles.csv"),
+             "--calibration", str(out / "ootx.toml")]
+    solve = _run(capsys, "solve", *files, "--output", str(out / "stations.toml"))
+    track = _run(capsys, "track", *files[:4], "--calibration", str(out / "ootx.toml"),
+                 "--stations", str(out / "stations.toml"), "--output", str(out / "track.csv"))
+    export = _run(capsys, "export", "cfclient", str(out / "stations.toml"), "--calibration",
+                  str(out / "ootx.toml"), "--imu", str(out / "imu.csv"), "--trajectory",
+                  str(out / "track.csv"), "--output", str(out / "system-config.yaml"))
+    workflows[name] = {"name": name, "out": out, "data": data, "solve": solve, "track": track,
+                       "export": export}
+    return workflows[name]
+
+
+def test_solve_and_track_print_a_verdict(workflow):
+    for step in ("solve", "track"):
+        code, out, _ = workflow[step]
+        verdicts = [line for line in out.splitlines() if line.startswith("verdict: ")]
+        assert len(verdicts) == 1, step
+        assert code == (3 if verdicts[0].startswith("verdict: FAILED") else 0), step
+
+
+def test_export_is_within_50_mm_of_cfclients_heights_or_refused(workflow, request):
+    if workflow["name"] in KNOWN_OFF:
+        request.node.add_marker(pytest.mark.xfail(reason=KNOWN_OFF[workflow["name"]],
+                                                  strict=True))
+    code, _, err = workflow["export"]
+    if code != 0:
+        assert code == 2 and any(r in err for r in REFUSALS), err
+        assert not (workflow["out"] / "system-config.yaml").exists()
+        return
+    ours = read_system_config(workflow["out"] / "system-config.yaml").T_world_lh
+    theirs = read_system_config(workflow["data"] / "system-config.yaml").T_world_lh
+    for k, T in ours.items():
+        assert abs(T[2, 3] - theirs[k][2, 3]) < HEIGHT_TOLERANCE_M, (k, T[2, 3], theirs[k][2, 3])
