@@ -12,7 +12,7 @@ along y). Each rotor may sit at an offset from the station origin. The factory c
              a1 = t' + g gibmag1 sin(gibphase1 + t') + c curve1 atan2(y, x)^2
 
 with the sign convention ``(g, c)`` an explicit parameter
-(:class:`~lhgraph.model.station.Convention`). Angles are in radians.
+(:class:`~lhgraph.model.factory.Convention`). Angles are in radians.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 if TYPE_CHECKING:
-    from lhgraph.model.station import Convention, FactoryCalibration
+    from lhgraph.model.factory import Convention, FactoryCalibration
 
 Array = NDArray[np.float64]
 

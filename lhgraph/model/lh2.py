@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 if TYPE_CHECKING:
-    from lhgraph.model.station import FactoryCalibration
+    from lhgraph.model.factory import FactoryCalibration
 
 Array = NDArray[np.float64]
 

@@ -25,52 +25,22 @@ from numpy.typing import ArrayLike, NDArray
 
 from lhgraph.geometry.transforms import cross
 from lhgraph.model import lh1, lh2
+from lhgraph.model.factory import (
+    CALIBRATION_KEYS,
+    LH2_CALIBRATION_KEYS,
+    Convention,
+    FactoryCalibration,
+)
+
+# the calibration terms (lhgraph.model.factory) are part of the station model's API
+__all__ = ["CALIBRATION_KEYS", "GENERATIONS", "IDEAL", "LH2_CALIBRATION_KEYS", "Convention",
+           "FactoryCalibration", "StationModel", "board_jacobian", "ideal_angles",
+           "ideal_from_measured", "ideal_pair_from_measured", "predict", "sensor_in_station",
+           "sweep_angle"]
 
 Array = NDArray[np.float64]
 
-CALIBRATION_KEYS = ("phase", "tilt", "curve", "gibphase", "gibmag")
-"""The factory-calibration terms of both generations (``[axis0, axis1]`` each, rad)."""
-LH2_CALIBRATION_KEYS = ("ogeephase", "ogeemag")
-"""The terms only LH2 stations have (zero on LH1)."""
 GENERATIONS = (1, 2)
-
-
-@dataclass(frozen=True)
-class Convention:
-    """Signs of the LH1 gib and curve terms. Public implementations disagree; the default
-    (gib -1, curve +1) fits two real recordings best (docs/model.md)."""
-
-    gib_sign: float = -1.0
-    curve_sign: float = 1.0
-
-
-@dataclass(frozen=True)
-class FactoryCalibration:
-    """Per-axis factory calibration of one station, each field ``[axis0, axis1]`` (rad; the
-    ogee terms LH2 only)."""
-
-    phase: Array = field(default_factory=lambda: np.zeros(2))
-    tilt: Array = field(default_factory=lambda: np.zeros(2))
-    curve: Array = field(default_factory=lambda: np.zeros(2))
-    gibphase: Array = field(default_factory=lambda: np.zeros(2))
-    gibmag: Array = field(default_factory=lambda: np.zeros(2))
-    ogeephase: Array = field(default_factory=lambda: np.zeros(2))
-    ogeemag: Array = field(default_factory=lambda: np.zeros(2))
-
-    def __post_init__(self) -> None:
-        for key in CALIBRATION_KEYS + LH2_CALIBRATION_KEYS:
-            value = np.asarray(getattr(self, key), dtype=float).reshape(2)
-            object.__setattr__(self, key, value)
-
-    def as_dict(self, generation: int = 1) -> dict[str, list[float]]:
-        """Plain ``{key: [axis0, axis1]}`` for files: the terms of ``generation``."""
-        keys = CALIBRATION_KEYS + (LH2_CALIBRATION_KEYS if generation == 2 else ())
-        return {key: [float(x) for x in getattr(self, key)] for key in keys}
-
-    def is_zero(self) -> bool:
-        """True when every term is zero (the ideal station)."""
-        return all(not np.any(getattr(self, key))
-                   for key in CALIBRATION_KEYS + LH2_CALIBRATION_KEYS)
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from lhgraph.signal.capture_imu import CaptureImu
 from lhgraph.signal.ootx import OotxPayload, encode_frame, pack_payload
 from lhgraph.signal.pulses import LightPulses
 from lhgraph.signal.sync import SYNC_BASE_S, SYNC_STEP_S
-from lhgraph.sim.simulate import SimulatedCapture
+from lhgraph.sim.common import SimulatedCapture
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ No raw signal: each station's rotor turns with its channel's period (SPEC §8) a
 phase, and in every revolution each of its two light planes crosses every diode once. The
 crossing time is solved on the moving board with the station's model
 (:func:`lhgraph.model.station.sweep_angle`, generation 2) like the LH1 hits
-(:func:`lhgraph.sim.simulate.solve_crossing_times`); visibility, Gaussian angle noise,
+(:func:`lhgraph.sim.common.solve_crossing_times`); visibility, Gaussian angle noise,
 reflections, per-hit dropouts and dropped whole sweeps follow. The angles are what an LH2
 decoder reports: the rotor angle of the plane at the hit, from the bitstream offset on the
 station's time base. Times in s (board clock), angles in rad.
@@ -21,6 +21,15 @@ from lhgraph.io.angles import Angles
 from lhgraph.model.board import Board
 from lhgraph.model.lh2 import ideal_angles, lh1_equivalent
 from lhgraph.model.station import StationModel
+from lhgraph.sim.common import (
+    CLOCK_PPM_RANGE,
+    SimulatedCapture,
+    facing,
+    setting,
+    solve_crossing_times,
+    timing_noise,
+    truth_and_imu,
+)
 from lhgraph.sim.config import (
     LH2_MAX_STATIONS,
     SimulationConfig,
@@ -28,15 +37,6 @@ from lhgraph.sim.config import (
     lh2_rotor_period_s,
 )
 from lhgraph.sim.layout import Scene
-from lhgraph.sim.simulate import (
-    CLOCK_PPM_RANGE,
-    SimulatedCapture,
-    _facing,
-    _timing_noise,
-    setting,
-    solve_crossing_times,
-    truth_and_imu,
-)
 
 PLANE_OFFSETS_RAD = np.array([-np.pi / 3, np.pi / 3])
 """Where each plane sits on the rotor: plane i crosses measured angle ``alpha`` at the rotor
@@ -95,7 +95,7 @@ def simulate_lh2(config: SimulationConfig, seed: int | None = None) -> Simulated
     k, row, station, plane, t, t_zero, period = (
         x[keep] for x in (k, row, station, plane, t, t_zero, period))
 
-    t, reflected = _timing_noise(config, t, period, rng)
+    t, reflected = timing_noise(config, t, period, rng)
     ok = (t >= 0) & (t <= config.duration_s)
     ok = np.flatnonzero(ok)[np.lexsort((board.ids[row[ok]], t[ok]))]
     k, row, station, plane, t, t_zero, period, reflected = (
@@ -137,6 +137,6 @@ def _visible_lh2(vis: VisibilityConfig, scene: Scene, board: Board, row: NDArray
     ``|azimuth| <= fov_h_deg`` and ``|elevation| <= fov_v_deg`` in LH1-equivalent angles."""
     ideal = ideal_angles(p_lh)
     az, el = lh1_equivalent(ideal[:, 0], ideal[:, 1])
-    return (_facing(vis, scene, board, row, station, T_world_board, p_lh)
+    return (facing(vis, scene, board, row, station, T_world_board, p_lh)
             & (np.abs(az) <= np.radians(vis.fov_h_deg))
             & (np.abs(el) <= np.radians(vis.fov_v_deg)))
