@@ -39,8 +39,7 @@ from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.graph.track import track
 from lhgraph.geometry.transforms import rotation_angle
-from lhgraph.sim.imu import simulate_imu
-from lhgraph.sim.simulate import load_simulation_config, simulate
+from lhgraph.sim.simulate import load_simulation_config, simulate, simulate_imu
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "configs/simulation/deck.toml"

@@ -1,5 +1,7 @@
 """The package's structure stays as docs/architecture.md describes it: modules of one
-concept (short), no import cycles, the layers importing only downwards, no god classes."""
+concept (short), no import cycles (not even through imports inside functions or for typing),
+the layers importing only downwards, no private name used outside its module (nor by the
+tests and benchmarks), no god classes."""
 
 from __future__ import annotations
 
@@ -38,20 +40,6 @@ def imported(node: ast.ImportFrom | ast.Import) -> set[str]:
             for a in node.names}
 
 
-def module_imports(path: Path) -> set[str]:
-    """lhgraph modules imported at module level (outside functions and TYPE_CHECKING)."""
-    out: set[str] = set()
-    for node in ast.parse(path.read_text()).body:
-        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
-            continue
-        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
-            continue
-        for sub in ast.walk(node):
-            if isinstance(sub, ast.ImportFrom | ast.Import):
-                out |= imported(sub)
-    return out
-
-
 def all_imports(path: Path) -> set[str]:
     """Every lhgraph module ``path`` imports, at module level, in functions or for typing."""
     out: set[str] = set()
@@ -73,7 +61,7 @@ def test_module_is_short(name):
 
 def test_no_import_cycle():
     mods = modules()
-    graph = {m: {i for i in module_imports(p) if i in mods} for m, p in mods.items()}
+    graph = {m: {i for i in all_imports(p) if i in mods and i != m} for m, p in mods.items()}
     state: dict[str, int] = {}
 
     def visit(m: str, stack: list[str]) -> None:
@@ -89,6 +77,77 @@ def test_no_import_cycle():
     for m in sorted(graph):
         if m not in state:
             visit(m, [m])
+
+
+def private_uses(path: Path) -> list[str]:
+    """Where ``path`` uses another lhgraph module's private name (``from lhgraph.x import
+    _y`` or ``lhgraph_module._y``), as ``line: name``."""
+    tree = ast.parse(path.read_text())
+    mods = modules()
+    aliases: set[str] = set()
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("lhgraph"):
+            for a in node.names:
+                if f"{node.module}.{a.name}" in mods:
+                    aliases.add(a.asname or a.name)
+                if a.name.startswith("_") and not a.name.startswith("__"):
+                    out.append(f"{node.lineno}: {node.module}.{a.name}")
+        elif isinstance(node, ast.Import):
+            aliases |= {a.asname or a.name.split(".")[0] for a in node.names
+                        if a.name.startswith("lhgraph")}
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Attribute) and node.attr.startswith("_")
+                and not node.attr.startswith("__")):
+            base = ast.unparse(node.value)
+            if base in aliases or base.startswith("lhgraph."):
+                out.append(f"{node.lineno}: {base}.{node.attr}")
+    return out
+
+
+STDLIB_HOOKS = {"_get_help_string"}
+"""Private names our classes override because the standard library calls them (argparse's
+help formatter), not our own."""
+
+
+@functools.cache
+def private_members() -> dict[str, set[str]]:
+    """The private methods and attributes of lhgraph's classes: name -> defining modules."""
+    out: dict[str, set[str]] = {}
+    for m, path in modules().items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef):
+                names = [b.name for b in node.body if isinstance(b, ast.FunctionDef)]
+                names += [b.target.id for b in node.body
+                          if isinstance(b, ast.AnnAssign) and isinstance(b.target, ast.Name)]
+            elif (isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store)
+                  and ast.unparse(node.value) == "self"):
+                names = [node.attr]
+            else:
+                continue
+            for name in names:
+                if name.startswith("_") and not name.startswith("__"):
+                    out.setdefault(name, set()).add(m)
+    return out
+
+
+def private_member_uses(path: Path, module: str) -> list[str]:
+    """Where ``path`` reaches into an lhgraph object's private member defined elsewhere."""
+    members = private_members()
+    return [f"{node.lineno}: {ast.unparse(node)}" for node in ast.walk(ast.parse(path.read_text()))
+            if isinstance(node, ast.Attribute) and node.attr in members
+            and node.attr not in STDLIB_HOOKS and module not in members[node.attr]
+            and ast.unparse(node.value) not in ("self", "cls")]
+
+
+def test_no_private_name_crosses_a_module():
+    root = PACKAGE.parent
+    files = {**{m: p for m, p in modules().items()},
+             **{str(p): p for p in [*(root / "tests").glob("*.py"),
+                                    *(root / "benchmarks").glob("*.py")]}}
+    uses = [f"{path.relative_to(root)}:{use}" for name, path in files.items()
+            for use in private_uses(path) + private_member_uses(path, name)]
+    assert not uses, "private names used outside their module:\n" + "\n".join(sorted(uses))
 
 
 def test_layers_import_downwards():

@@ -30,8 +30,8 @@ from lhgraph.estimation.graph.variables import (
 from lhgraph.estimation.imu.combined import RESIDUAL_GROUPS, preintegrate
 from lhgraph.estimation.metrics import station_errors
 from lhgraph.io.imu import ImuStream
-from lhgraph.sim.imu import ImuConfig, simulate_imu
-from lhgraph.sim.simulate import load_simulation_config, simulate
+from lhgraph.sim.imu import ImuConfig
+from lhgraph.sim.simulate import load_simulation_config, simulate, simulate_imu
 
 FACING = "configs/simulation/facing_planar_imu.toml"
 STILL_BIAS = dict(gyro_bias_walk_rad_s_per_sqrt_s=0.0, accel_bias_walk_mps2_per_sqrt_s=0.0)

@@ -255,14 +255,18 @@ def test_cross_station_cost_with_one_measurement_of_the_other_station():
 def test_partial_view_cost_prefers_the_true_twin(deck_capture):
     # the other station's few-diode sweeps near each measurement tell its twins apart, and
     # with that cost the Viterbi keeps fewer wrong twins
-    from lhgraph.estimation.init.few_diode import cross_station_cost, partial_view_cost
+    from lhgraph.estimation.init.few_diode import (
+        cross_station_cost,
+        partial_view_cost,
+        station_twins,
+    )
 
     cap = deck_capture
     angles = retime_cycles(cap.angles)
     models = {i: cap.truth.stations[i].model for i in cap.truth.indices()}
     problem = build_problem(cap.board, angles, models, 0)
     init = FewDiodeInitialiser()
-    twins = init._twins(cap.board, angles, problem)
+    twins = station_twins(cap.board, angles, problem)
     T0 = cap.truth.pose(0)
     L = np.stack([inverse(T0) @ cap.truth.pose(s) for s in problem.station_ids])
     wrong = {}

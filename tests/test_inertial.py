@@ -30,8 +30,7 @@ from lhgraph.io.imu import ImuStream, load_imu, save_imu
 from lhgraph.io.stations import load_stations, save_stations
 from lhgraph.model.boards import crazyflie_deck
 from lhgraph.model.calibration import StationCalibration, save_calibration
-from lhgraph.sim.imu import simulate_imu
-from lhgraph.sim.simulate import load_simulation_config, simulate, write_simulation
+from lhgraph.sim.simulate import load_simulation_config, simulate, simulate_imu, write_simulation
 from lhgraph.workflow.inputs import station_models
 from lhgraph.workflow.solve import solve
 

@@ -12,7 +12,7 @@ import pytest
 
 from lhgraph.errors import SolverError
 from lhgraph.estimation.graph.solver import solve_graph
-from lhgraph.estimation.init.pnp_kabsch import join_paths, overlap_tree
+from lhgraph.estimation.init.pnp_kabsch import chain_to_reference, join_paths, overlap_tree
 from lhgraph.estimation.metrics import station_errors
 from lhgraph.geometry.transforms import inverse, so3_exp
 from lhgraph.model.boards import board_by_name
@@ -101,13 +101,11 @@ def test_join_paths_chains_and_names_an_unlinked_station():
         join_paths(board, problem, _paths(windows, L))
 
 
-def test_weak_link_warning_names_the_chain():
-    from lhgraph.estimation.graph.solver import _chain
-
+def test_weak_link_warning_names_thechain_to_reference():
     # slot 3 was joined to slot 1, slot 1 to the reference
-    assert _chain(3, [0, 0, 3, 1]) == [3, 1, 0]
-    assert _chain(2, [0, 0, 3, 1]) == [2, 3, 1, 0]
-    assert _chain(2, []) == [2, 0]  # parents unknown: the station and the reference
+    assert chain_to_reference(3, [0, 0, 3, 1]) == [3, 1, 0]
+    assert chain_to_reference(2, [0, 0, 3, 1]) == [2, 3, 1, 0]
+    assert chain_to_reference(2, []) == [2, 0]  # parents unknown: the station and the reference
 
 
 def test_eight_station_room():

@@ -22,7 +22,7 @@ from lhgraph.model.boards import board_by_name
 from lhgraph.model.station import StationModel, sweep_angle
 from lhgraph.signal.pulses import LightPulses
 from lhgraph.sim.config import ROTOR_PERIOD_S, SimulationConfig, VisibilityConfig
-from lhgraph.sim.imu import SimulatedImu, imu_of_motion
+from lhgraph.sim.imu import ImuConfig, SimulatedImu, imu_of_motion
 from lhgraph.sim.layout import Scene, parametric_scene, scene_from_poses
 from lhgraph.sim.motion import Motion, facing_rotation, make_motion
 
@@ -200,3 +200,11 @@ def truth_and_imu(config: SimulationConfig, scene: Scene, models: list[StationMo
                          for i in range(len(models))}, extra)
     return truth, Trajectory(t_traj, motion.pose(t_traj)), imu
 
+
+def simulate_imu(capture: SimulatedCapture, config: ImuConfig | None = None, seed: int = 0
+                 ) -> SimulatedImu:
+    """The IMU stream of ``capture``'s board over its duration, with noise and biases from
+    ``config`` (default :class:`ImuConfig`) drawn by ``seed``."""
+    return imu_of_motion(capture.motion, capture.truth.extra["simulation"]["up"],
+                         capture.config.duration_s, config or ImuConfig(),
+                         np.random.default_rng(seed))

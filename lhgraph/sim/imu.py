@@ -1,4 +1,5 @@
-"""A simulated IMU on the simulated board: :func:`imu_of_motion`, :func:`simulate_imu`.
+"""A simulated IMU on the simulated board: :func:`imu_of_motion` (a capture's own stream:
+:func:`lhgraph.sim.common.simulate_imu`).
 
 Sampled from the capture's exact motion (:class:`lhgraph.sim.motion.Motion`) at the board
 origin, in the board frame, on the capture's clock: the gyro reads the body angular rate,
@@ -21,7 +22,6 @@ when asked. A simulation config asks for a stream with an ``[imu]`` table
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -30,9 +30,6 @@ from lhgraph.config import check_fields, option
 from lhgraph.geometry.transforms import so3_exp, so3_log
 from lhgraph.io.imu import STANDARD_GRAVITY_MPS2, ImuStream
 from lhgraph.sim.motion import Motion
-
-if TYPE_CHECKING:
-    from lhgraph.sim.simulate import SimulatedCapture
 
 Array = NDArray[np.float64]
 DIFF_STEP_S = 1e-4
@@ -110,11 +107,3 @@ def imu_of_motion(motion: Motion, up: ArrayLike, duration_s: float, config: ImuC
         + rng.normal(0, config.accel_sigma_mps2, force.shape)
     return SimulatedImu(ImuStream(stamp, accel_read, gyro), bias + walk.mean(axis=0), gravity)
 
-
-def simulate_imu(capture: SimulatedCapture, config: ImuConfig | None = None, seed: int = 0
-                 ) -> SimulatedImu:
-    """The IMU stream of ``capture``'s board over its duration, with noise and biases from
-    ``config`` (default :class:`ImuConfig`) drawn by ``seed``."""
-    return imu_of_motion(capture.motion, capture.truth.extra["simulation"]["up"],
-                         capture.config.duration_s, config or ImuConfig(),
-                         np.random.default_rng(seed))

@@ -33,6 +33,7 @@ from lhgraph.sim.common import (
     facing,
     scene_of,
     setting,
+    simulate_imu,
     solve_crossing_times,
     timing_noise,
     truth_and_imu,
@@ -56,8 +57,8 @@ from lhgraph.sim.motion import Motion
 # it gives (lhgraph.sim.common) are part of it
 __all__ = ["SimulatedCapture", "SimulationConfig", "SweepSlots", "default_simulation_config",
            "load_simulation_config", "paper_protocol", "parse_simulation_config",
-           "pulse_width_s", "scene_of", "schedule", "simulate", "solve_crossing_times",
-           "solve_hit_times", "write_simulation"]
+           "pulse_width_s", "scene_of", "schedule", "simulate", "simulate_imu",
+           "solve_crossing_times", "solve_hit_times", "write_simulation"]
 
 STATION_CLOCK_HZ = 48e6
 SYNC_SPACING_S = 20000 / STATION_CLOCK_HZ  # between consecutive stations' sync flashes

@@ -25,7 +25,7 @@ from lhgraph.estimation.graph.resolve import Resolution, prepare, resolve_option
 from lhgraph.estimation.imu.refinement import refine_with_imu
 from lhgraph.estimation.init import Initialiser
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
-from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser
+from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser, chain_to_reference
 from lhgraph.estimation.problem import GraphProblem, build_problem
 from lhgraph.estimation.rests import thin_rests
 from lhgraph.estimation.result import Residuals, SolveResult
@@ -120,15 +120,6 @@ def say_resolution(resolution: Resolution, progress: Progress | None) -> None:
                 progress(f"option {line}")
 
 
-def _chain(slot: int, parents: list[int]) -> list[int]:
-    """Slots from ``slot`` to the reference (slot 0) along ``parents`` (``[slot, 0]`` when
-    the parents are not known)."""
-    chain = [slot]
-    while chain[-1] != 0 and len(chain) <= len(parents):
-        chain.append(parents[chain[-1]] if chain[-1] < len(parents) else 0)
-    return chain if chain[-1] == 0 else [slot, 0]
-
-
 def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: OptimizerResult,
             cov: dict[int, Array], resolution: Resolution, timings: dict[str, float], t0: float,
             parents: list[int] | None = None, diagnostics: dict[str, float] | None = None,
@@ -148,7 +139,7 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
         out[sid] = Station(poses[slot].copy(), cov[slot], problem.models[slot])
         sigma_m = float(np.sqrt(np.max(np.linalg.eigvalsh(cov[slot][3:, 3:]))))
         if sigma_m > options.data.weak_link_sigma_m:
-            chain = _chain(slot, parents or [])
+            chain = chain_to_reference(slot, parents or [])
             via = (" by both" if len(chain) <= 2 else " by two neighbours of the chain "
                    + " - ".join(str(problem.station_ids[c]) for c in chain))
             warnings.append(f"station {sid}: weak link to the reference (position sigma "

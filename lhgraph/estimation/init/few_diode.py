@@ -139,6 +139,16 @@ def triangulated(paths: list[tuple[Array, Array, Array]], T_world_lh: Array,
     return out
 
 
+def station_twins(board: Board, angles: Angles, problem: GraphProblem) -> list[TwinPath]:
+    """Each station's pair of twin board paths (:func:`twin_path`), by slot, the stations
+    in parallel threads (numpy releases the GIL in its array loops). LH2 stations' twins
+    come from their ideal LH1-equivalent angles: from the plane angles they converge far
+    from the board off the optical axis."""
+    lh2 = any(m.generation == 2 for m in problem.models)
+    return in_threads(partial(twin_path, board, angles, problem, ideal_lh1=lh2),
+                      len(problem.station_ids))
+
+
 @dataclass(frozen=True)
 class FewDiodeInitialiser:
     """The :class:`~lhgraph.estimation.init.Initialiser` for few-diode boards (see the module
@@ -172,7 +182,7 @@ class FewDiodeInitialiser:
     partial_max_gap_s: float = 0.05
 
     def __call__(self, board: Board, angles: Angles, problem: GraphProblem) -> Initialisation:
-        twins = self._twins(board, angles, problem)
+        twins = station_twins(board, angles, problem)
         # pass 1: each station's twins by their own fit; stations joined on those paths
         paths = [chosen_path(tw, tw.emission, self.turn_sigma) for tw in twins]
         L0, overlap = join_paths(board, problem, self._floored(paths), self.max_gap_s)
@@ -185,17 +195,9 @@ class FewDiodeInitialiser:
                       T_world_lh: Array) -> Initialisation:
         """Board states with every station known at ``T_world_lh`` (S, 4, 4) by slot
         (tracking): the twins that agree with the other stations' views, triangulated."""
-        twins = self._twins(board, angles, problem)
+        twins = station_twins(board, angles, problem)
         return self._states(self._agreeing_paths(twins, T_world_lh, problem), T_world_lh,
                             problem, [])
-
-    def _twins(self, board: Board, angles: Angles, problem: GraphProblem) -> list[TwinPath]:
-        S = len(problem.station_ids)
-        # LH2: the twins from the ideal LH1-equivalent angles (twin_path's ideal_lh1; from
-        # the plane angles they converge far from the board off the optical axis); the
-        # stations in parallel threads (numpy releases the GIL in its array loops)
-        lh2 = any(m.generation == 2 for m in problem.models)
-        return in_threads(partial(twin_path, board, angles, problem, ideal_lh1=lh2), S)
 
     def _agreeing_paths(self, twins: list[TwinPath], T_world_lh: Array, problem: GraphProblem
                         ) -> list[tuple[Array, Array, Array]]:

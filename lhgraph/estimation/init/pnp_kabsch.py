@@ -191,6 +191,15 @@ def relative_pose(board: Board, parent: tuple[Array, Array, Array],
     return weighted_kabsch(src.reshape(-1, 3), dst.reshape(-1, 3), w)
 
 
+def chain_to_reference(slot: int, parents: list[int]) -> list[int]:
+    """Slots from ``slot`` to the reference (slot 0) along ``parents`` (:func:`overlap_tree`;
+    ``[slot, 0]`` when the parents are not known)."""
+    chain = [slot]
+    while chain[-1] != 0 and len(chain) <= len(parents):
+        chain.append(parents[chain[-1]] if chain[-1] < len(parents) else 0)
+    return chain if chain[-1] == 0 else [slot, 0]
+
+
 def join_paths(board: Board, problem: GraphProblem, paths: list[tuple[Array, Array, Array]],
                max_gap_s: float = 0.05, parents: list[int] | None = None,
                matches: NDArray[np.int64] | None = None, imu: ImuStream | None = None
