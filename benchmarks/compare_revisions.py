@@ -116,9 +116,10 @@ def answers(base: Path, head: Path, work: Path, seeds: int) -> list[str]:
             lhgraph(base, "simulate", str(base / "configs/simulation" / f"{family}.toml"),
                     "--seed", str(seed), "--output", str(cap))
             calibration = 'calibration = "ootx.toml"\n' if (cap / "ootx.toml").exists() else ""
+            imu = 'imu = "imu.csv"\n' if (cap / "imu.csv").exists() else ""
             (cap / "solve.toml").write_text(
                 'board = "board.toml"\nangles = "angles.csv"\ntruth = "truth.toml"\n'
-                f'method = "graph"\n{calibration}')
+                f'method = "graph"\n{calibration}{imu}')
             summary = {}
             for name, tree in (("base", base), ("head", head)):
                 run = cap / f"run-{name}"
