@@ -20,7 +20,6 @@ import numpy as np
 
 from lhgraph.errors import InputError, SolverError
 from lhgraph.estimation.world_alignment import (
-    STANDARD_GRAVITY_MPS2,
     UpEstimate,
     WorldAlignment,
     WorldOptions,
@@ -222,10 +221,6 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
     system = system_type(stations, stations_path, calibrations, calibration)
     stream = None if imu is None else load_imu(imu)
     path_poses = None if trajectory is None else load_trajectory(trajectory)
-    if stream is not None and np.median(np.linalg.norm(stream.accel_mps2, axis=1)) < 0.5 * (
-            STANDARD_GRAVITY_MPS2):
-        raise InputError("the accelerometer reads well below 1 g: imu.csv must be in m/s^2",
-                         imu)
     up = _up(options, stations, calibrations, stream, path_poses)
     alignment = align_world(stations, up, path_poses, options)
     if stream is not None and path_poses is not None and alignment.at_s is not None:
