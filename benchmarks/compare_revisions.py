@@ -195,7 +195,9 @@ def timing(base: Path, head: Path, work: Path, runs: int, inputs: list[str], tit
 
 def log_inputs(folder: Path) -> list[str]:
     """The ``lhgraph solve`` inputs of an imported log ``folder`` (``lhgraph import``'s
-    board.toml, angles.csv and ootx.toml)."""
+    board.toml, angles.csv and ootx.toml), as absolute paths (both revisions run in their own
+    tree)."""
+    folder = folder.resolve()
     inputs = ["--board", str(folder / "board.toml"), "--angles", str(folder / "angles.csv")]
     if (folder / "ootx.toml").is_file():
         inputs += ["--calibration", str(folder / "ootx.toml")]
