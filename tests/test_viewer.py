@@ -125,3 +125,39 @@ def test_view_without_display_says_what_it_needs(run_dir: Path, env: dict[str, s
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
     assert "display" in err and "--export FILE.png" in err
+
+
+class _NoLibusb:
+    """An import hook that fails ``import open3d`` as a machine without libusb does."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name == "open3d":
+            raise OSError("libusb-1.0.so.0: cannot open shared object file: No such file")
+        return None
+
+
+@pytest.mark.parametrize("broken", ["missing", "no-libusb"])
+def test_export_without_open3d_falls_back_to_matplotlib_and_says_so(
+        run_dir: Path, tmp_path: Path, broken: str, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture) -> None:
+    import sys
+
+    monkeypatch.delitem(sys.modules, "open3d", raising=False)
+    if broken == "missing":
+        monkeypatch.setitem(sys.modules, "open3d", None)
+    else:
+        monkeypatch.setattr(sys, "meta_path", [_NoLibusb(), *sys.meta_path])
+    png = tmp_path / "v.png"
+    assert main(["view", str(run_dir), "--export", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    assert "matplotlib: Open3D cannot load here" in out, out
+    if broken == "no-libusb":
+        assert "libusb-1.0.so.0" in out
+    # what only Open3D can do: one line, exit 2, no traceback
+    assert main(["view", str(run_dir), "--export", str(tmp_path / "v.ply")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "export a .png" in err, err
+    assert main(["view", str(run_dir), "--export", str(tmp_path / "w.png"),
+                 "--renderer", "open3d"]) == 2
+    assert "--renderer matplotlib" in capsys.readouterr().err

@@ -132,9 +132,19 @@ def _add_run(scene: Scene, run_dir: Path, board: Board | None, board_poses: int,
                                  (0.1, 0.3, 0.9))
 
 
+def load_open3d():
+    """The ``open3d`` module, or :class:`InputError` saying why it cannot load here (it needs
+    libusb and an OpenGL library at import: ``libusb-1.0.so.0``, ``libGL.so.1``)."""
+    try:
+        import open3d
+    except (ImportError, OSError) as exc:
+        raise InputError(f"Open3D cannot load here ({str(exc).splitlines()[0]})") from None
+    return open3d
+
+
 def to_open3d(scene: Scene, point_radius_m: float = 0.01, line_radius_m: float = 0.004):
     """A single Open3D ``TriangleMesh``: a thin cylinder per segment, a sphere per point."""
-    import open3d as o3d
+    o3d = load_open3d()
 
     mesh = o3d.geometry.TriangleMesh()
     for (a, b), colour in zip(scene.segments, scene.segment_colours, strict=True):
@@ -188,8 +198,7 @@ def show(scene: Scene) -> None:
     problem = display_problem()
     if problem is not None:
         raise InputError(f"{problem}: {hint}")
-    import open3d as o3d
-
+    o3d = load_open3d()
     vis = o3d.visualization.Visualizer()
     if not vis.create_window(window_name="lhgraph view"):
         raise InputError(f"Open3D could not open a window: {hint}")
@@ -198,14 +207,17 @@ def show(scene: Scene) -> None:
     vis.destroy_window()
 
 
-def _png_open3d(scene: Scene, path: Path, size: tuple[int, int]) -> bool:
-    """Render with Open3D's offscreen renderer; False when it cannot run here (no GPU/EGL)."""
-    import open3d as o3d
-
+def _png_open3d(scene: Scene, path: Path, size: tuple[int, int]) -> str | None:
+    """Render with Open3D's offscreen renderer; None when done, else why it cannot run here
+    (Open3D does not load, or no GPU/EGL)."""
+    try:
+        o3d = load_open3d()
+    except InputError as exc:
+        return str(exc)
     try:
         renderer = o3d.visualization.rendering.OffscreenRenderer(*size)
     except RuntimeError:
-        return False
+        return "Open3D's offscreen renderer cannot run here (no EGL/GPU)"
     material = o3d.visualization.rendering.MaterialRecord()
     material.shader = "defaultLit"
     renderer.scene.add_geometry("scene", to_open3d(scene), material)
@@ -214,7 +226,7 @@ def _png_open3d(scene: Scene, path: Path, size: tuple[int, int]) -> bool:
     renderer.setup_camera(60.0, centre, centre + np.array([-1.0, -1.5, 1.0]) * np.max(hi - lo),
                           [0, 0, 1])
     o3d.io.write_image(str(path), renderer.render_to_image())
-    return True
+    return None
 
 
 def _bounds(scene: Scene) -> tuple[NDArray, NDArray]:
@@ -250,7 +262,8 @@ def export(scene: Scene, path: str | Path, overwrite: bool = False,
            renderer: str = "auto") -> tuple[Path, str]:
     """Write the scene without a display: a mesh (``.ply``/``.glb``/``.gltf``/``.obj``) or
     a ``.png``. ``renderer`` for PNGs: ``"open3d"``, ``"matplotlib"`` or ``"auto"`` (Open3D's
-    offscreen renderer, falling back to matplotlib). Returns the path and what wrote it."""
+    offscreen renderer, falling back to matplotlib). Returns the path and what wrote it (with
+    the reason when matplotlib stood in for Open3D)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (*MESH_FORMATS, ".png"):
@@ -258,13 +271,19 @@ def export(scene: Scene, path: str | Path, overwrite: bool = False,
                          f"{', '.join(MESH_FORMATS)})", path)
     check_writable(path, overwrite)
     if suffix == ".png":
-        if renderer in ("auto", "open3d") and _png_open3d(scene, path, (1024, 768)):
+        if renderer == "matplotlib":
+            return png_matplotlib(scene, path, overwrite), "matplotlib"
+        problem = _png_open3d(scene, path, (1024, 768))
+        if problem is None:
             return path, "open3d"
         if renderer == "open3d":
-            raise InputError("Open3D's offscreen renderer cannot run here (no EGL/GPU)", path)
-        return png_matplotlib(scene, path, overwrite), "matplotlib"
-    import open3d as o3d
-
+            raise InputError(f"{problem}: --renderer matplotlib draws the PNG instead", path)
+        return png_matplotlib(scene, path, overwrite), f"matplotlib: {problem}"
+    try:
+        o3d = load_open3d()
+    except InputError as exc:
+        raise InputError(f"{exc}: a {suffix} mesh needs it; export a .png (matplotlib) "
+                         "instead", path) from None
     if not o3d.io.write_triangle_mesh(str(path), to_open3d(scene)):
         raise InputError("Open3D could not write the mesh", path)
     return path, "open3d"
