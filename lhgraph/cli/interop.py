@@ -56,6 +56,9 @@ def _run_import_crazyflie(args: argparse.Namespace) -> int:
                               overwrite=args.force)
     if not args.quiet:
         print(result.summary())
+    else:  # what a damaged log lost is said even when quiet
+        for note in result.notes:
+            print(f"{args.log}: {note}", file=sys.stderr)
     return 0
 
 

@@ -7,8 +7,11 @@ NUL-terminated name, ``u16 n_vars`` and per variable a NUL-terminated ``name(T)`
 a :mod:`struct` type character; then events (``u16 id``, timestamp, the variables packed in
 header order, no padding) up to the last 4 bytes, the CRC-32 (zlib) of everything before.
 
-A damaged log keeps what is valid: events are read up to the first one that is cut short,
-has an unknown id or goes back in time, and :attr:`UsdLog.notes` says what was dropped.
+A damaged log keeps what is valid and :attr:`UsdLog.notes` says what was dropped: after
+bytes that are no event (an unknown id: flipped, inserted or lost bytes) the reader
+resynchronises on the next run of :data:`RESYNC_RUN` whole events of known ids; an event
+out of time order with its neighbours of its type is dropped; a cut-short last event ends
+the log.
 """
 
 from __future__ import annotations
@@ -83,6 +86,11 @@ RESERVED = ("id", "timestamp")
 """Field names every event record has: no variable may take them."""
 
 
+RESYNC_RUN = 8
+"""Whole events of known ids in a row that resynchronise the reader after damage (random
+bytes pass as one with odds of about n_types / 65536 per event)."""
+
+
 def _cstring(data: bytes, pos: int, source: Path) -> tuple[str, int]:
     end = data.find(b"\0", pos)
     if end < 0:
@@ -130,24 +138,56 @@ def _read_header(data: bytes, source: Path) -> tuple[int, tuple[EventType, ...],
     return version, tuple(types), pos
 
 
+def _event_run(data: bytes, pos: int, end: int, sizes: dict[int, int], limit: int) -> int:
+    """How many whole events of known ids follow one another from ``pos`` (at most
+    ``limit``)."""
+    n = 0
+    while n < limit and pos + 2 <= end:
+        size = sizes.get(data[pos] | (data[pos + 1] << 8))
+        if size is None or pos + size > end:
+            break
+        pos += size
+        n += 1
+    return n
+
+
 def _scan(data: bytes, start: int, end: int, sizes: dict[int, int]
-          ) -> tuple[list[int], list[int], int, str]:
-    """Offsets and ids of the whole events in ``data[start:end]``; the byte where reading
-    stopped and why (empty when it reached ``end``)."""
-    offsets, ids, pos = [], [], start
+          ) -> tuple[list[int], list[int], list[tuple[int, int, str]]]:
+    """Offsets and ids of the whole events in ``data[start:end]``, and the damaged stretches
+    skipped, ``(first byte, first byte after, why)``: after an unknown event id the reading
+    resumes at the first byte from which :data:`RESYNC_RUN` events of known ids follow one
+    another (or the events left reach ``end`` exactly); a cut-short last event ends it."""
+    offsets, ids, gaps, pos = [], [], [], start
     while pos < end:
         if pos + 2 > end:
-            return offsets, ids, pos, "a cut-short last event"
+            gaps.append((pos, end, "a cut-short last event"))
+            break
         type_id = data[pos] | (data[pos + 1] << 8)
         size = sizes.get(type_id)
         if size is None:
-            return offsets, ids, pos, f"unknown event id {type_id}"
+            resume = next((p for p in range(pos + 1, end - 1)
+                           if _event_run(data, p, end, sizes, RESYNC_RUN) == RESYNC_RUN
+                           or _reaches_end(data, p, end, sizes)), end)
+            gaps.append((pos, resume, f"unknown event id {type_id}"))
+            pos = resume
+            continue
         if pos + size > end:
-            return offsets, ids, pos, "a cut-short last event"
+            gaps.append((pos, end, "a cut-short last event"))
+            break
         offsets.append(pos)
         ids.append(type_id)
         pos += size
-    return offsets, ids, pos, ""
+    return offsets, ids, gaps
+
+
+def _reaches_end(data: bytes, pos: int, end: int, sizes: dict[int, int]) -> bool:
+    """True when whole events of known ids run from ``pos`` exactly to ``end``."""
+    while pos + 2 <= end:
+        size = sizes.get(data[pos] | (data[pos + 1] << 8))
+        if size is None or pos + size > end:
+            return False
+        pos += size
+    return pos == end
 
 
 def read_usd_log(path: str | Path) -> UsdLog:
@@ -160,33 +200,34 @@ def read_usd_log(path: str | Path) -> UsdLog:
     crc_ok = len(data) >= start + 4 and (
         zlib.crc32(data[:-4]) == int.from_bytes(data[-4:], "little"))
     end = len(data) - 4 if crc_ok else len(data)
-    offsets, ids, stop, why = _scan(data, start, end, sizes)
+    offsets, ids, gaps = _scan(data, start, end, sizes)
     notes = []
     if not crc_ok:
         notes.append("CRC mismatch (log truncated or corrupted)")
+    for a, b, why in gaps:
+        what = "the CRC is missing" if not crc_ok and b == end else f"resumed at byte {b}"
+        notes.append(f"dropped bytes {a}-{b} ({b - a} bytes: {why}; {what})")
     # The timestamps of one event type never go back (types interleave slightly out of
-    # order); the first event that does marks damage.
+    # order): an event later than the next of its type, or earlier than the one before, is
+    # damaged (a spike or a dip drops it and at most one neighbour) and dropped.
     ts_dtype = np.dtype(TIMESTAMP_TYPE[version])
     buf = np.frombuffer(data, dtype=np.uint8)
     off = np.asarray(offsets, dtype=np.int64)
     ids_arr = np.asarray(ids, dtype=np.int64)
     ts = buf[(off[:, None] + 2 + np.arange(ts_dtype.itemsize)).ravel()].copy().view(ts_dtype)
-    back = []
+    back = np.zeros(len(off), dtype=bool)
     for type_id in by_id:
         at = np.flatnonzero(ids_arr == type_id)
-        back += list(at[1:][np.diff(ts[at].astype(np.int64)) < 0][:1])
-    if back:
-        n_keep = int(min(back))
-        stop, why = int(off[n_keep]), "an event going back in time"
-        off, ids_arr = off[:n_keep], ids_arr[:n_keep]
-    if why:
-        tail = len(data) - stop - (0 if not crc_ok else 4)
-        if not crc_ok and why == "a cut-short last event":
-            notes.append(f"kept {len(off)} events; dropped the last {len(data) - stop} bytes "
-                         f"from byte {stop} ({why}, the CRC is missing)")
-        else:
-            notes.append(f"kept {len(off)} events; dropped events after byte {stop} ({why}, "
-                         f"{tail} bytes)")
+        step_back = np.diff(ts[at].astype(np.int64)) < 0
+        back[at[1:]] |= step_back
+        back[at[:-1]] |= step_back
+    if back.any():
+        first = int(off[np.flatnonzero(back)[0]])
+        notes.append(f"dropped {int(back.sum())} event(s) going back in time, the first at "
+                     f"byte {first}")
+        off, ids_arr = off[~back], ids_arr[~back]
+    if gaps or back.any():
+        notes.append(f"kept {len(off)} events")
     elif not crc_ok:
         # Read to the very end without a CRC: the last 4 bytes were event data, unless they
         # are exactly a damaged CRC; events parse cleanly, so the damage is inside values.
