@@ -32,6 +32,9 @@ def _run_import_hive(args: argparse.Namespace) -> int:
                          sync_bits=not args.keep_sync_offsets)
     if not args.quiet:
         print(result.summary())
+    else:  # what a damaged bag lost is said even when quiet
+        for note in result.notes:
+            print(f"{args.bag}: {note}", file=sys.stderr)
     return 0
 
 

@@ -15,13 +15,15 @@ messages (all three are stamped on the recording host's clock).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
+from lhgraph.importers.hive.salvage import salvage_bag
 from lhgraph.model.board import Board, make_board
 from lhgraph.model.station import FactoryCalibration
 
@@ -55,7 +57,7 @@ class HiveBag:
     convention), ``length_us`` (pulse length) and ``sweep`` (sweep message number).
     ``n_dropped`` hits were beyond ``MAX_ABS_ANGLE_RAD``; ``off_grid_sweeps`` (per station)
     sweeps with ``n_off_grid_hits`` hits were off their station's timing grid
-    (:func:`off_grid_sweeps`); neither is in ``light``.
+    (:func:`off_grid_sweeps`); neither is in ``light``. ``notes``: what a damaged bag lost.
     ``hive_calibrations`` are keyed by station index with the OOTX terms in *hive's* axis order
     ``[horizontal, vertical]``.
     """
@@ -75,6 +77,7 @@ class HiveBag:
     mocap_time: Array
     mocap_position: Array
     mocap_quat_wxyz: Array
+    notes: tuple[str, ...] = ()
 
 
 def _stamp(header: object) -> float:
@@ -88,8 +91,55 @@ def _station_order(serials: set[str]) -> list[str]:
     return sorted(serials)
 
 
+@dataclass
+class _Collected:
+    """What the messages of a hive bag give, as they are read."""
+
+    light_rows: list[tuple[float, str, int, int, float, float, int]] = field(
+        default_factory=list)
+    lighthouses: dict[str, tuple[object, object]] = field(default_factory=dict)
+    tracker: object = None
+    imu: list[tuple[float, ...]] = field(default_factory=list)
+    mocap: list[tuple[float, ...]] = field(default_factory=list)
+    sweep: int = 0
+
+    def add(self, topic: str, msg: object, mocap_topic: str) -> None:
+        """Take one message of ``topic``."""
+        if topic == TOPIC_LIGHT:
+            t = _stamp(msg.header)
+            for s in msg.samples:
+                self.light_rows.append((t, msg.lighthouse, int(msg.axis), int(s.sensor),
+                                        float(s.angle), float(s.length), self.sweep))
+            self.sweep += 1
+        elif topic == TOPIC_IMU:
+            a, g = msg.linear_acceleration, msg.angular_velocity
+            self.imu.append((_stamp(msg.header), a.x, a.y, a.z, g.x, g.y, g.z))
+        elif topic == mocap_topic:
+            p, q = msg.pose.position, msg.pose.orientation
+            self.mocap.append((_stamp(msg.header), p.x, p.y, p.z, q.w, q.x, q.y, q.z))
+        elif topic == TOPIC_LIGHTHOUSES:
+            for lh in msg.lighthouses:
+                self.lighthouses[lh.serial] = (lh.horizontal, lh.vertical)
+        elif topic == TOPIC_TRACKERS and msg.trackers:
+            self.tracker = msg.trackers[0]
+
+
+def _mocap_topic(topics: set[str], path: Path) -> str:
+    """The bag's motion-capture topic; InputError when a hive topic is missing."""
+    mocap_topics = sorted(t for t in topics
+                          if t.startswith(MOCAP_PREFIX) and t.endswith(MOCAP_SUFFIX))
+    needed = [TOPIC_LIGHT, TOPIC_LIGHTHOUSES, TOPIC_TRACKERS, TOPIC_IMU]
+    missing = [t for t in needed if t not in topics] + ([] if mocap_topics else
+                                                        [MOCAP_PREFIX + "*/pose"])
+    if missing:
+        raise InputError(f"not a hive recording: missing topic(s) {', '.join(missing)}", path)
+    return mocap_topics[0]
+
+
 def read_hive_bag(bag_path: str | Path) -> HiveBag:
-    """Read a hive bag; bad files raise InputError naming the file."""
+    """Read a hive bag; bad files raise InputError naming the file. A bag cut short (no
+    index) keeps its whole messages before the cut (:mod:`lhgraph.importers.hive.salvage`)
+    and says so in :attr:`HiveBag.notes`."""
     from rosbags.highlevel import AnyReader, AnyReaderError
     from rosbags.rosbag1 import ReaderError
     from rosbags.typesys import Stores, get_typestore
@@ -100,56 +150,36 @@ def read_hive_bag(bag_path: str | Path) -> HiveBag:
     if path.is_dir():
         raise InputError("is a directory, expected a ROS1 .bag file", path)
     typestore = get_typestore(Stores.ROS1_NOETIC)
-    light_rows: list[tuple[float, str, int, int, float, float, int]] = []
-    lighthouses: dict[str, tuple[object, object]] = {}
-    tracker = None
-    imu: list[tuple[float, ...]] = []
-    mocap: list[tuple[float, ...]] = []
-    mocap_topic = ""
+    got = _Collected()
+    notes: tuple[str, ...] = ()
     try:
         # AnyReader registers the bag's own message definitions (hive/msg/*) in a copy of
         # the typestore, so no hive package is needed.
         with AnyReader([path], default_typestore=typestore) as reader:
-            topics = {c.topic for c in reader.connections}
-            mocap_topics = sorted(t for t in topics
-                                  if t.startswith(MOCAP_PREFIX) and t.endswith(MOCAP_SUFFIX))
-            needed = [TOPIC_LIGHT, TOPIC_LIGHTHOUSES, TOPIC_TRACKERS, TOPIC_IMU]
-            missing = [t for t in needed if t not in topics] + ([] if mocap_topics else
-                                                                [MOCAP_PREFIX + "*/pose"])
-            if missing:
-                raise InputError(f"not a hive recording: missing topic(s) {', '.join(missing)}",
-                                 path)
-            mocap_topic = mocap_topics[0]
-            wanted = [c for c in reader.connections if c.topic in (*needed, mocap_topic)]
-            sweep = 0
+            mocap_topic = _mocap_topic({c.topic for c in reader.connections}, path)
+            wanted = [c for c in reader.connections if c.topic in (
+                TOPIC_LIGHT, TOPIC_LIGHTHOUSES, TOPIC_TRACKERS, TOPIC_IMU, mocap_topic)]
             for conn, _t, raw in reader.messages(connections=wanted):
-                msg = reader.deserialize(raw, conn.msgtype)
-                if conn.topic == TOPIC_LIGHT:
-                    t = _stamp(msg.header)
-                    for s in msg.samples:
-                        light_rows.append((t, msg.lighthouse, int(msg.axis), int(s.sensor),
-                                           float(s.angle), float(s.length), sweep))
-                    sweep += 1
-                elif conn.topic == TOPIC_IMU:
-                    a, g = msg.linear_acceleration, msg.angular_velocity
-                    imu.append((_stamp(msg.header), a.x, a.y, a.z, g.x, g.y, g.z))
-                elif conn.topic == mocap_topic:
-                    p, q = msg.pose.position, msg.pose.orientation
-                    mocap.append((_stamp(msg.header), p.x, p.y, p.z, q.w, q.x, q.y, q.z))
-                elif conn.topic == TOPIC_LIGHTHOUSES:
-                    for lh in msg.lighthouses:
-                        lighthouses[lh.serial] = (lh.horizontal, lh.vertical)
-                elif conn.topic == TOPIC_TRACKERS and msg.trackers:
-                    tracker = msg.trackers[0]
+                got.add(conn.topic, reader.deserialize(raw, conn.msgtype), mocap_topic)
     except (AnyReaderError, ReaderError) as exc:
-        raise InputError(f"not a readable ROS1 bag ({exc})", path) from None
+        salvage = salvage_bag(path, typestore)
+        if not salvage.messages:
+            raise InputError(f"not a readable ROS1 bag ({exc})", path) from None
+        mocap_topic = _mocap_topic({topic for topic, _ in salvage.messages}, path)
+        for topic, msg in salvage.messages:
+            got.add(topic, msg, mocap_topic)
+        notes = (f"cut short (no index): kept the {len(salvage.messages)} messages of its "
+                 f"first {salvage.kept_bytes} bytes, dropped the last "
+                 f"{salvage.size - salvage.kept_bytes} of {salvage.size} bytes",)
     except (UnicodeDecodeError, AssertionError, ValueError, KeyError, IndexError) as exc:
         # what rosbags raises on bytes it does not expect inside a bag's records
         raise InputError(f"not a readable ROS1 bag (corrupted: {type(exc).__name__})",
                          path) from None
-    if not light_rows or not imu or not mocap or tracker is None:
+    if not got.light_rows or not got.imu or not got.mocap or got.tracker is None:
         raise InputError("hive recording without light, IMU, mocap or tracker messages", path)
-    return _assemble(path, light_rows, lighthouses, tracker, imu, mocap, mocap_topic)
+    bag = _assemble(path, got.light_rows, got.lighthouses, got.tracker, got.imu, got.mocap,
+                    mocap_topic)
+    return dataclasses.replace(bag, notes=notes)
 
 
 def off_grid_sweeps(time: Array, station: NDArray, axis: NDArray, sweep: NDArray,

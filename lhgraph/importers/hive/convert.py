@@ -44,10 +44,12 @@ class HiveImport:
     off_grid_sweeps: dict[int, int] = field(default_factory=dict)
     n_off_grid_hits: int = 0
     sync_bits: SyncBitCorrection | None = None
+    notes: tuple[str, ...] = ()
+    """What a damaged bag lost (:attr:`lhgraph.importers.hive.bag.HiveBag.notes`)."""
 
     def summary(self) -> str:
         """Human-readable lines."""
-        lines = [
+        lines = [f"bag: {n}" for n in self.notes] + [
             f"stations: {len(self.serials)} ("
             + ", ".join(f"{i}={s}" for i, s in enumerate(self.serials)) + ")",
             f"sensors: {self.n_sensors}; hits kept {self.n_hits}, dropped {self.n_dropped} "
@@ -111,5 +113,5 @@ def import_hive(bag_path: str | Path, out_dir: str | Path, overwrite: bool = Fal
         n_sensors=len(bag.board.ids), off_grid_sweeps=bag.off_grid_sweeps,
         n_off_grid_hits=bag.n_off_grid_hits, duration_s=float(t_all.max() - t_all.min()),
         sweep_rate_hz=rates, imu_rate_hz=_rate_hz(bag.imu_time),
-        mocap_rate_hz=_rate_hz(bag.mocap_time), sync_bits=correction,
+        mocap_rate_hz=_rate_hz(bag.mocap_time), sync_bits=correction, notes=bag.notes,
     )
