@@ -1,4 +1,4 @@
-"""Commands that use a calibration: ``track``, ``view``."""
+"""Commands that use a calibration: ``track``, ``view``, ``compare``."""
 
 from __future__ import annotations
 
@@ -90,3 +90,49 @@ def run_view(args: argparse.Namespace) -> int:
 
 
 COMMANDS.append(("view", add_view, run_view))
+
+
+# --- compare ---
+
+
+def add_compare(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("compare", help="did a station move between two calibrations?",
+                       description="Compare two stations TOMLs of one room station by station "
+                       "in the frame of a station they share: each difference in mm, degrees "
+                       "and combined sigmas, and a verdict (exit 0 same layout, 3 a station "
+                       "moved; docs/compare.md).")
+    p.add_argument("a", help="stations TOML (the earlier calibration)")
+    p.add_argument("b", help="stations TOML (the later calibration)")
+    p.add_argument("--reference", type=int, help="the common station whose frame both are "
+                   "compared in (default: A's reference if B has it, else the lowest common)")
+    p.add_argument("--k-sigma", type=float, default=3.0,
+                   help="moved: over this many combined sigmas...")
+    p.add_argument("--floor-mm", type=float, default=40.0,
+                   help="...and over this position difference (mm; docs/compare.md)")
+    p.add_argument("--floor-deg", type=float, default=0.6,
+                   help="...or this rotation difference (deg)")
+    p.add_argument("--json", help="also write the comparison as JSON to this file")
+    add_common_output(p)
+    mark_inputs(p, "a", "b")
+    return p
+
+
+def run_compare(args: argparse.Namespace) -> int:
+    from lhgraph.estimation.layout_compare import CompareOptions, compare_layouts
+    from lhgraph.io.stations import load_stations
+    from lhgraph.report.layout_compare import comparison_json, comparison_table
+
+    a, b = load_stations(args.a), load_stations(args.b)
+    options = CompareOptions(args.k_sigma, args.floor_mm, args.floor_deg)
+    result = compare_layouts(a, b, args.reference, options)
+    if args.json:
+        from lhgraph.io.files import write_atomic
+
+        write_atomic(args.json, comparison_json(result, args.a, args.b).encode(), args.force)
+    if not args.quiet:
+        print(comparison_table(result))
+    print(("verdict: " if not result.moved else "MOVED: ") + result.verdict())
+    return 3 if result.moved else 0
+
+
+COMMANDS.append(("compare", add_compare, run_compare))

@@ -1,0 +1,101 @@
+"""`lhgraph compare` on the shared recordings of unmoved stations: each pair solved, compared.
+
+Each pair records the same stations, unmoved (SPEC §5): Bitcraze's LH2 hand-held log00 and
+log01, its LH1 hand-held log02 and flight log00, hive's data8.11 and data8.17. Every log is
+imported (`lhgraph import`) and solved with the default graph method and its factory
+calibration (`lhgraph solve`) as whole processes in a temporary folder, then the two results
+are compared (`lhgraph compare`, default options). Writes docs/results/compare_pairs.md: per
+pair and station the difference (mm, deg), the combined sigma the results report and the
+difference in those sigmas, and the verdict. Pairs whose data is absent are skipped. Data:
+Crazyflie, hive (no licence: read from ../shared only). ~2 min.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from datetime import date
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+DATA = ROOT.parent / "shared" / "data"
+CF = "bitcraze-positioning"
+PAIRS = {
+    "LH2 hand-held log00 / log01": (
+        ("crazyflie", f"{CF}/lh2_crossingBeam_move/log00"),
+        ("crazyflie", f"{CF}/lh2_crossingBeam_move/log01")),
+    "LH1 hand-held log02 / flight log00": (
+        ("crazyflie", f"{CF}/lh1_crossingBeam_move/log02"),
+        ("crazyflie", f"{CF}/lh1_crossingBeam_flight/log00")),
+    "hive data8.11 / data8.17": (
+        ("hive", "hive-env8/data8.11.bag"), ("hive", "hive-env8/data8.17.bag")),
+}
+
+
+def lhgraph(*args: str) -> subprocess.CompletedProcess:
+    """``python -m lhgraph ARGS`` with this checkout's package."""
+    return subprocess.run([sys.executable, "-m", "lhgraph", *args], cwd=ROOT,
+                          capture_output=True, text=True)
+
+
+def solved(kind: str, source: Path, work: Path) -> Path:
+    """Import ``source`` into ``work`` and solve it; the stations TOML."""
+    extra = ["--system-config", str(source.parent / "system-config.yaml")] \
+        if kind == "crazyflie" else []
+    done = lhgraph("import", kind, str(source), *extra, "--output", str(work), "--quiet")
+    if done.returncode:
+        raise SystemExit(f"import {source}: {done.stderr.strip()}")
+    out = work / "stations.toml"
+    done = lhgraph("solve", "--board", str(work / "board.toml"), "--angles",
+                   str(work / "angles.csv"), "--calibration", str(work / "ootx.toml"),
+                   "--output", str(out), "--quiet")
+    if done.returncode not in (0, 3):
+        raise SystemExit(f"solve {source}: {done.stderr.strip()}")
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks compare_pairs",
+                                     description=__doc__.splitlines()[0])
+    parser.add_argument("--output", type=Path,
+                        default=ROOT / "docs" / "results" / "compare_pairs.md")
+    args = parser.parse_args(argv)
+    lines = ["# `lhgraph compare` on recordings of unmoved stations", "",
+             "Command: `python -m benchmarks compare_pairs`  ",
+             f"Each log imported and solved by the default graph method; {date.today()}", "",
+             "| pair | station | dp (mm) | dR (deg) | combined sigma (mm / deg) "
+             "| dp / sigma | dR / sigma | verdict (exit) |", "|---|---|---|---|---|---|---|---|"]
+    with tempfile.TemporaryDirectory(prefix="lhgraph-pairs-") as tmp:
+        for name, logs in PAIRS.items():
+            if not all((DATA / path).exists() for _, path in logs):
+                lines.append(f"| {name} | skipped: data absent | | | | | | |")
+                continue
+            results = [solved(kind, DATA / path, Path(tmp) / f"{name[:3]}{i}")
+                       for i, (kind, path) in enumerate(logs)]
+            report = Path(tmp) / "cmp.json"
+            done = lhgraph("compare", *map(str, results), "--json", str(report), "--force",
+                           "--quiet")
+            if done.returncode not in (0, 3):
+                raise SystemExit(f"compare: {done.stderr.strip()}")
+            c = json.loads(report.read_text())
+            for k, d in c["stations"].items():
+                sig = (f"{d['sigma_position_m'] * 1e3:.2f} / "
+                       f"{d['sigma_rotation_rad'] * 57.29578:.4f}"
+                       if d["sigma_position_m"] is not None else "none")
+                lines.append(
+                    f"| {name} | {k} | {d['position_m'] * 1e3:.1f} | "
+                    f"{d['rotation_rad'] * 57.29578:.3f} | {sig} | "
+                    f"{d['position_sigmas'] or float('nan'):.1f} | "
+                    f"{d['rotation_sigmas'] or float('nan'):.1f} | "
+                    f"{c['verdict']} ({done.returncode}) |")
+            print(name, c["verdict"], flush=True)
+    args.output.write_text("\n".join(lines) + "\n")
+    print(f"wrote {args.output}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
