@@ -60,6 +60,7 @@ def test_a_shifted_station_moved_by_its_shift_in_combined_sigmas():
     # two files of 2 mm each: the combined sigma along any direction is 2 * sqrt(2) mm
     assert d[2].sigma_position_m == pytest.approx(2e-3 * np.sqrt(2), rel=1e-9)
     assert d[2].position_sigmas == pytest.approx(50 / (2 * np.sqrt(2)), rel=1e-6)
+    assert np.isnan(d[2].sigma_white_position_m)  # the files have no white covariance
     assert c.verdict().startswith("station 2 moved by 50.0 mm / 0.00 deg (17.7 /")
 
 
@@ -119,3 +120,15 @@ def test_cli_exit_codes_table_and_json(tmp_path: Path, capsys):
         assert main(args) == 2, args
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+
+
+def test_white_sigmas_beside_the_honest_ones_which_judge():
+    honest = _layout(sigma_mm=5.0)
+    a = Stations(0, {k: dataclasses.replace(s, covariance_white=None if s.covariance is None
+                                            else s.covariance / 25)
+                     for k, s in honest.stations.items()})
+    b = _moved(a, 1, dp_m=(0.02, 0, 0))  # 20 mm: 2.8 honest sigmas, 14 white ones
+    d = compare_layouts(a, b, options=CompareOptions(floor_mm=0.0)).differences[0]
+    assert d.sigma_position_m == pytest.approx(5e-3 * np.sqrt(2), rel=1e-9)
+    assert d.sigma_white_position_m == pytest.approx(1e-3 * np.sqrt(2), rel=1e-9)
+    assert not d.moved  # judged on the honest sigma (3 x 7.1 mm), not the white one

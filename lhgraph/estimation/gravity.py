@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.estimation.result import SolveResult
-from lhgraph.io.stations import Station, Stations
+from lhgraph.io.stations import Stations
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.calibration import StationCalibration
 
@@ -119,8 +119,7 @@ def to_gravity_world(result: SolveResult, up: dict[int, Array]) -> SolveResult:
     T, spread = gravity_rotation(result.stations, up)
     stations = Stations(
         result.stations.reference,
-        {k: Station(T @ s.T_world_lh, s.covariance, s.model)
-         for k, s in result.stations.stations.items()},
+        {k: s.moved(T) for k, s in result.stations.stations.items()},
         {**result.stations.extra, "world": "gravity"},
     )
     trajectory = None

@@ -43,7 +43,8 @@ class StationDifference:
     """One station's difference B - A in the common reference frame: ``dp_m`` (3,) m, its
     norm ``position_m``, ``rotation_rad``, and the combined 1-sigma along the position
     difference ``sigma_position_m`` and about the rotation axis ``sigma_rotation_rad``
-    (NaN when a file has no covariance); ``moved`` by the options' rule."""
+    (NaN when a file has no covariance); ``moved`` by the options' rule; the same sigmas of
+    the files' white-noise covariances (``sigma_white_*``, NaN when a file has none)."""
 
     station: int
     dp_m: np.ndarray
@@ -52,6 +53,8 @@ class StationDifference:
     sigma_position_m: float
     sigma_rotation_rad: float
     moved: bool
+    sigma_white_position_m: float = float("nan")
+    sigma_white_rotation_rad: float = float("nan")
 
     @property
     def position_sigmas(self) -> float:
@@ -100,6 +103,16 @@ def _sigma_along(cov: np.ndarray, direction: np.ndarray) -> float:
     return float(np.sqrt(max(u @ cov @ u, 0.0)))
 
 
+def _combined_sigmas(covs: list[np.ndarray | None], dp: np.ndarray, rotvec: np.ndarray
+                     ) -> tuple[float, float]:
+    """The 1-sigma of the sum of two covariances ``covs`` (6x6, NaN when one is missing) along
+    the position difference ``dp`` and about the rotation axis ``rotvec``."""
+    if any(c is None for c in covs):
+        return float("nan"), float("nan")
+    cov = covs[0] + covs[1]
+    return _sigma_along(cov[3:, 3:], dp), _sigma_along(cov[:3, :3], rotvec)
+
+
 def compare_layouts(a: Stations, b: Stations, reference: int | None = None,
                     options: CompareOptions | None = None) -> LayoutComparison:
     """Compare calibration ``b`` with ``a`` in the frame of a common station (``reference``,
@@ -123,19 +136,17 @@ def compare_layouts(a: Stations, b: Stations, reference: int | None = None,
         A, B = T_ref_a @ a.pose(k), T_ref_b @ b.pose(k)
         dp = B[:3, 3] - A[:3, 3]
         dR = A[:3, :3].T @ B[:3, :3]
-        covs = [s.stations[k].covariance for s in (a, b)]
-        cov = (np.full((6, 6), np.nan) if any(c is None for c in covs)
-               else covs[0] + covs[1])
         # the position difference in A's station frame, where the covariance's translation is
-        sigma_p = _sigma_along(cov[3:, 3:], A[:3, :3].T @ dp)
-        sigma_r = _sigma_along(cov[:3, :3], so3_log(dR))
+        along = (A[:3, :3].T @ dp, so3_log(dR))
+        sigma_p, sigma_r = _combined_sigmas([s.stations[k].covariance for s in (a, b)], *along)
+        white = _combined_sigmas([s.stations[k].covariance_white for s in (a, b)], *along)
         position, rotation = float(np.linalg.norm(dp)), float(rotation_angle(dR))
         limit_p = max(options.floor_mm * 1e-3,
                       0.0 if np.isnan(sigma_p) else options.k_sigma * sigma_p)
         limit_r = max(np.radians(options.floor_deg),
                       0.0 if np.isnan(sigma_r) else options.k_sigma * sigma_r)
         diffs.append(StationDifference(k, dp, position, rotation, sigma_p, sigma_r,
-                                       bool(position > limit_p or rotation > limit_r)))
+                                       bool(position > limit_p or rotation > limit_r), *white))
     return LayoutComparison(reference, diffs, options,
                             sorted(set(a.stations) - set(b.stations)),
                             sorted(set(b.stations) - set(a.stations)))

@@ -42,7 +42,7 @@ from lhgraph.errors import InputError
 from lhgraph.estimation.gravity import gravity_rotation, up_vectors
 from lhgraph.geometry.transforms import make_pose
 from lhgraph.io.imu import STANDARD_GRAVITY_MPS2
-from lhgraph.io.stations import Station, Stations
+from lhgraph.io.stations import Stations
 from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.calibration import StationCalibration
 
@@ -246,6 +246,5 @@ def transform_stations(stations: Stations, T_new_w: Array) -> Stations:
     """``stations`` re-expressed in the new world (covariances are in each station's own
     tangent space and do not change)."""
     return Stations(stations.reference,
-                    {k: Station(T_new_w @ s.T_world_lh, s.covariance, s.model)
-                     for k, s in stations.stations.items()},
+                    {k: s.moved(T_new_w) for k, s in stations.stations.items()},
                     dict(stations.extra))

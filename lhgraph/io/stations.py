@@ -1,15 +1,16 @@
 """Station poses and their files (truth and results share one format, SPEC §4).
 
 ``[lighthouses.<index>]`` tables hold ``position`` and ``quaternion = [w, x, y, z]`` of
-``T_world_lh``; results add ``covariance`` (6x6, tangent order ``[rx, ry, rz, tx, ty, tz]``)
-and may add the factory-calibration keys and ``rotor_offsets``; an LH2 station has
-``generation = 2`` (LH1 when absent), its ogee terms and maybe its ``channel``
-(docs/formats.md).
+``T_world_lh``; results add ``covariance`` (6x6, tangent order ``[rx, ry, rz, tx, ty, tz]``; the
+graph's is the honest one, docs/uncertainty.md), may add ``covariance_white`` (the same for
+independent residuals only) and may add the factory-calibration keys and
+``rotor_offsets``; an LH2 station has ``generation = 2`` (LH1 when absent), its ogee terms
+and maybe its ``channel`` (docs/formats.md).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -33,11 +34,18 @@ from lhgraph.model.station import CALIBRATION_KEYS, FactoryCalibration, StationM
 
 @dataclass
 class Station:
-    """One station: ``T_world_lh`` (4x4), optional covariance (6x6) and model."""
+    """One station: ``T_world_lh`` (4x4), optional covariance (6x6), model and optional
+    white-noise covariance (6x6; ``covariance`` is then the honest one)."""
 
     T_world_lh: NDArray[np.float64]
     covariance: NDArray[np.float64] | None = None
     model: StationModel = field(default_factory=StationModel)
+    covariance_white: NDArray[np.float64] | None = None
+
+    def moved(self, T_new_world: NDArray[np.float64]) -> Station:
+        """The same station in a new world, ``T_new_world @ T_world_lh`` (its covariances
+        are in its own tangent space and do not change)."""
+        return replace(self, T_world_lh=T_new_world @ self.T_world_lh)
 
 
 @dataclass
@@ -61,8 +69,7 @@ class Stations:
         T_ref_world = np.linalg.inv(self.pose(self.reference))
         return Stations(
             self.reference,
-            {k: Station(T_ref_world @ s.T_world_lh, s.covariance, s.model)
-             for k, s in self.stations.items()},
+            {k: s.moved(T_ref_world) for k, s in self.stations.items()},
             dict(self.extra),
         )
 
@@ -92,11 +99,10 @@ def load_stations(path: str | Path) -> Stations:
         norm = np.linalg.norm(q)
         if not 0.9 < norm < 1.1:
             raise InputError(f"quaternion norm {norm:.3g} is not ~1", path, where + ".quaternion")
-        cov = None
-        if "covariance" in table:
-            cov = as_matrix(table["covariance"], 6, 6, path, where + ".covariance")
+        cov, white = (as_matrix(table[key], 6, 6, path, f"{where}.{key}") if key in table
+                      else None for key in ("covariance", "covariance_white"))
         stations[index] = Station(pose_from_quat(position, q / norm), cov,
-                                  _parse_model(table, path, where))
+                                  _parse_model(table, path, where), white)
     if reference not in stations:
         raise InputError(f"reference station {reference} has no [lighthouses.{reference}] table",
                          path, "reference")
@@ -113,8 +119,9 @@ def stations_to_toml(stations: Stations, with_model: bool = True) -> dict[str, A
             "position": [float(x) for x in s.T_world_lh[:3, 3]],
             "quaternion": [float(x) for x in matrix_to_quat(s.T_world_lh[:3, :3])],
         }
-        if s.covariance is not None:
-            table["covariance"] = [[float(x) for x in row] for row in s.covariance]
+        for key, cov in (("covariance", s.covariance), ("covariance_white", s.covariance_white)):
+            if cov is not None:
+                table[key] = [[float(x) for x in row] for row in cov]
         if with_model and not s.model.calibration.is_zero():
             table.update(s.model.calibration.as_dict(s.model.generation))
         if with_model and np.any(s.model.rotor_offsets):

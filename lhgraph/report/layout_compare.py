@@ -49,7 +49,9 @@ def comparison_json(c: LayoutComparison, a: str | Path, b: str | Path) -> str:
             "sigma_position_m": _finite(d.sigma_position_m),
             "sigma_rotation_rad": _finite(d.sigma_rotation_rad),
             "position_sigmas": _finite(d.position_sigmas),
-            "rotation_sigmas": _finite(d.rotation_sigmas), "moved": bool(d.moved)}
+            "rotation_sigmas": _finite(d.rotation_sigmas), "moved": bool(d.moved),
+            "sigma_white_position_m": _finite(d.sigma_white_position_m),
+            "sigma_white_rotation_rad": _finite(d.sigma_white_rotation_rad)}
             for d in c.differences},
         "only_in_a": c.only_in_a, "only_in_b": c.only_in_b,
         "moved": [d.station for d in c.moved], "verdict": c.verdict(),

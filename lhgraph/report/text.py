@@ -17,6 +17,26 @@ SIGMA_NOTE = (
     "and the rotation (deg); per axis in summary.json and report.html")
 
 
+def covariance_note(result: SolveResult) -> list[str]:
+    """Which covariance the sigmas are (the honest time-block one, or the white one) and, for
+    the honest one, the white-noise sigmas beside it; nothing for a result without both."""
+    white = {k: s.covariance_white for k, s in result.stations.stations.items()
+             if s.covariance_white is not None and np.any(s.covariance_white)}
+    n = int(result.diagnostics.get("covariance_blocks", 0))
+    if not white:
+        return []
+    if (result.options or {}).get("uncertainty", {}).get("covariance") == "white" or n < 2:
+        return ["sigma: white noise (the residuals taken as independent): it does not cover "
+                "what repeats between recordings (docs/uncertainty.md)"]
+    block = result.diagnostics.get("covariance_block_s", float("nan"))
+    parts = ", ".join(f"{k} {np.sqrt(np.trace(c[3:, 3:])) * 1e3:.3f} mm / "
+                      f"{np.degrees(np.sqrt(np.trace(c[:3, :3]))):.4f} deg"
+                      for k, c in sorted(white.items()))
+    return [f"sigma: honest, from the spread of {n} time blocks of {block:.2f} s (covers "
+            "residuals correlated in time; the verdict and compare use it; docs/uncertainty.md)",
+            f"white-noise sigma (independent residuals), by station: {parts}"]
+
+
 def format_solution(result: SolveResult, errors: list[PoseError] | None = None) -> str:
     """A plain-text table of the stations, residuals, timings and (optional) errors."""
     lines = [f"method {result.method}: {result.status} after {result.iterations} iterations"]
@@ -41,6 +61,7 @@ def format_solution(result: SolveResult, errors: list[PoseError] | None = None) 
                      f"{e[2]:8.3f} {sig}{ref}")
     if any(s.covariance is not None for s in result.stations.stations.values()):
         lines.append(SIGMA_NOTE)
+        lines.extend(covariance_note(result))
     if result.residuals is not None:
         r = result.residuals
         lines.append(f"residuals: {len(r.residual_rad)} hits, rms {r.rms_urad():.1f} µrad "

@@ -127,6 +127,11 @@ def station_summary(stations: Stations) -> dict[str, Any]:
             sigma = pose_sigma(s.T_world_lh, s.covariance)
             entry["sigma_position_world_mm"] = (sigma.position_m * 1e3).tolist()
             entry["sigma_euler_deg"] = np.degrees(sigma.euler_rad).tolist()
+        if s.covariance_white is not None:
+            entry["sigma_white_position_mm"] = (np.sqrt(np.diag(s.covariance_white)[3:])
+                                                * 1e3).tolist()
+            entry["sigma_white_rotation_deg"] = np.degrees(
+                np.sqrt(np.diag(s.covariance_white)[:3])).tolist()
         out[str(k)] = entry
     return out
 

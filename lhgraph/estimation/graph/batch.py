@@ -86,12 +86,6 @@ def build_and_optimise(problem: GraphProblem, options: GraphOptions, init: Initi
     return fit, ev, found
 
 
-def station_covariances(fit: OptimizerResult, ev: FactorEvaluator) -> dict[int, Array]:
-    """The station variables' marginal covariances (6, 6) by slot."""
-    return {slot: fit.covariance(STATION_POSE.key(slot))
-            for slot in ev.layout.indices(STATION_POSE)}
-
-
 def _watched(watch: Watch, ev: FactorEvaluator, hook: NoiseHook | None, values: gtsam.Values,
              linearized: Linearized | None = None) -> bool:
     """The noise hook ``hook`` (None: none) after ``watch(ev, values)``."""

@@ -97,7 +97,7 @@ class OptimizerResult:
     """End of an optimisation: the values, status, iterations taken, the error at the start
     and after each iteration (empty for iSAM2), the final error, and the eliminated linear
     system at the result (``tree``; ``covariance_from_last_iteration``: it is the last LM
-    iteration's undamped one rather than a new linearisation)."""
+    iteration's undamped one rather than a new linearisation) and the ``graph`` optimised."""
 
     values: gtsam.Values
     status: Status
@@ -106,6 +106,7 @@ class OptimizerResult:
     final_error: float
     tree: gtsam.GaussianBayesTree
     covariance_from_last_iteration: bool
+    graph: gtsam.NonlinearFactorGraph
 
     def covariance(self, key: int) -> Array:
         """Marginal covariance of variable ``key`` (tangent space)."""
@@ -273,7 +274,7 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
     if not reused:
         tree = graph.linearize(values).eliminateMultifrontal(ordering)
     return OptimizerResult(values, _status(converged, iterations, params.max_iterations),
-                           iterations, history, error, tree, reused)
+                           iterations, history, error, tree, reused, graph)
 
 
 def isam2_batch(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
@@ -302,4 +303,4 @@ def isam2_batch(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
     error = graph.error(result)
     tree = graph.linearize(result).eliminateMultifrontal(layout.elimination_ordering())
     return OptimizerResult(result, _status(converged, iterations, max_iterations), iterations,
-                           [], error, tree, False)
+                           [], error, tree, False, graph)

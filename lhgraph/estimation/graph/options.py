@@ -1,7 +1,8 @@
 """The graph solver's options, nested by concern: :class:`GraphOptions` holds one frozen
 dataclass per concern (the optimiser and its stopping rule, the diodes' noise, the robust
-loss, the motion prior, the IMU, the board's self-calibration, the data), each of whose
-fields declares its allowed values (:func:`lhgraph.config.option`).
+loss, the motion prior, the IMU, the board's self-calibration, the data, the stations'
+uncertainty), each of whose fields declares its allowed values
+(:func:`lhgraph.config.option`).
 
 Every option keeps one name across the groups, so a configuration's ``[graph]`` table may
 give it flat (``max_iterations = 30``) or in its group's sub-table (``[graph.optimizer]``);
@@ -29,6 +30,7 @@ SWEEP_TIMES = ("auto", "stamped")
 PRIOR_ESTIMATES = ("auto", "chi2", "redundancy")
 ACCEL_ESTIMATES = ("auto", "stream", "redundancy")
 IMU_FACTORS = ("auto", "combined", "twist")
+COVARIANCES = ("blocks", "white")
 
 
 @dataclass(frozen=True)
@@ -249,6 +251,24 @@ class DataOptions:
 
 
 @dataclass(frozen=True)
+class UncertaintyOptions:
+    """Which covariance the stations carry (:mod:`lhgraph.estimation.graph.block_covariance`).
+
+    ``covariance``: ``"blocks"`` (the time-block sandwich, never narrower than the white
+    one: it covers the residuals' correlation in time, docs/uncertainty.md) or ``"white"``
+    (the graph's marginals, which hold for independent residuals only); the white one is
+    kept beside it either way. ``covariance_blocks``: the capture is cut into this many
+    time blocks, each at least ``min_block_s`` long."""
+
+    covariance: str = option("blocks", choices=COVARIANCES)
+    covariance_blocks: int = option(30, ge=2, le=10000)
+    min_block_s: float = option(0.5, gt=0)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
 class GraphOptions:
     """Every option of the graph solver, one group per concern (defaults suit 2 MHz LH1
     captures). Each option's allowed range is declared next to it; a value outside it
@@ -261,6 +281,7 @@ class GraphOptions:
     imu: ImuOptions = group(ImuOptions)
     board: BoardOptions = group(BoardOptions)
     data: DataOptions = group(DataOptions)
+    uncertainty: UncertaintyOptions = group(UncertaintyOptions)
 
     @classmethod
     def of(cls, **flat: Any) -> GraphOptions:

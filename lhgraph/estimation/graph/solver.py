@@ -9,15 +9,18 @@ angles prepared and options resolved (:mod:`.resolve`) -> problem
 
 from __future__ import annotations
 
+import functools
 import re
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import SolverError
-from lhgraph.estimation.graph.batch import build_and_optimise, station_covariances
+from lhgraph.estimation.graph.batch import build_and_optimise
+from lhgraph.estimation.graph.block_covariance import StationCovariances, station_covariances
 from lhgraph.estimation.graph.evaluator import FactorEvaluator
 from lhgraph.estimation.graph.optimizer import OptimizerResult
 from lhgraph.estimation.graph.options import GraphOptions
@@ -92,8 +95,12 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     if progress:
         progress(f"initialised {problem.n_states} board states, {len(problem.hits.angle)} hits")
     t1 = time.perf_counter()
-    fit, ev, cov = build_and_optimise(problem, resolution.options, init, station_covariances,
-                                      progress)
+    # with an IMU the refinement's covariances are the result's: the light's white ones will do
+    uncertainty = (resolution.options.uncertainty if imu is None else
+                   replace(resolution.options.uncertainty, covariance="white"))
+    fit, ev, cov = build_and_optimise(
+        problem, resolution.options, init,
+        functools.partial(station_covariances, options=uncertainty), progress)
     notes: list[str] = []
     extra = {} if rests is None else {"rest_hits_dropped": float(rests.hits_dropped)}
     if imu is not None:
@@ -121,7 +128,7 @@ def say_resolution(resolution: Resolution, progress: Progress | None) -> None:
 
 
 def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: OptimizerResult,
-            cov: dict[int, Array], resolution: Resolution, timings: dict[str, float], t0: float,
+            cov: StationCovariances, resolution: Resolution, timings: dict[str, float], t0: float,
             parents: list[int] | None = None, diagnostics: dict[str, float] | None = None,
             notes: list[str] | None = None) -> SolveResult:
     """The :class:`SolveResult` of a finished solve, ``ev`` evaluated at the result;
@@ -132,12 +139,13 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
     reference = problem.station_ids[0]
     poses = ev.station_poses()
     out: dict[int, Station] = {reference: Station(np.eye(4), np.zeros((6, 6)),
-                                                  problem.models[0])}
+                                                  problem.models[0], np.zeros((6, 6)))}
     warnings = list(notes or [])
     for slot in range(1, len(problem.station_ids)):
         sid = problem.station_ids[slot]
-        out[sid] = Station(poses[slot].copy(), cov[slot], problem.models[slot])
-        sigma_m = float(np.sqrt(np.max(np.linalg.eigvalsh(cov[slot][3:, 3:]))))
+        out[sid] = Station(poses[slot].copy(), cov.honest[slot], problem.models[slot],
+                           cov.white[slot])
+        sigma_m = float(np.sqrt(np.max(np.linalg.eigvalsh(cov.white[slot][3:, 3:]))))
         if sigma_m > options.data.weak_link_sigma_m:
             chain = chain_to_reference(slot, parents or [])
             via = (" by both" if len(chain) <= 2 else " by two neighbours of the chain "
@@ -160,7 +168,7 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
         timings_s=timings,
         warnings=warnings,
         error_history=fit.error_history,
-        diagnostics=ev.summary() | (diagnostics or {}),
+        diagnostics=ev.summary() | cov.summary() | (diagnostics or {}),
         gravity_world=ev.gravity(),
         diode_bias_rad=({sid: b.reshape(2, -1).copy() for sid, b in zip(
                             problem.station_ids, ev.corrections.diode_biases(), strict=True)}

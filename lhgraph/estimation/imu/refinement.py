@@ -14,6 +14,7 @@ converge in 60 iterations.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -21,7 +22,8 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.estimation.graph.batch import Watch, build_and_optimise, station_covariances
+from lhgraph.estimation.graph.batch import Watch, build_and_optimise
+from lhgraph.estimation.graph.block_covariance import StationCovariances, station_covariances
 from lhgraph.estimation.graph.evaluator import FactorEvaluator
 from lhgraph.estimation.graph.optimizer import OptimizerResult
 from lhgraph.estimation.graph.resolve import Resolution
@@ -52,13 +54,13 @@ IMU_FACTOR_NAMES = {"combined": "GTSAM's combined IMU factors",
 @dataclass(frozen=True)
 class ImuRefinement:
     """The refined solve: the optimiser's ``fit`` (iterations and error history counting
-    the light-only stage's), its evaluator ``ev``, the stations' ``covariances`` by slot,
+    the light-only stage's), its evaluator ``ev``, the stations' ``covariances``,
     the options it ran with (``resolution``), warnings (``notes``) and figures of its own
     (``diagnostics``: the IMU calibration found from the light)."""
 
     fit: OptimizerResult
     ev: FactorEvaluator
-    covariances: dict[int, Array]
+    covariances: StationCovariances
     resolution: Resolution
     notes: list[str]
     diagnostics: dict[str, float]
@@ -101,6 +103,7 @@ def refine_with_imu(problem: GraphProblem, resolution: Resolution, auto: bool,
     the IMU stream ``imu`` under the resolved options ``resolution`` (``auto``: the user
     left ``imu_factors`` to the solve, which may then fall back to the twist factors)."""
     options = resolution.options
+    marginals = functools.partial(station_covariances, options=options.uncertainty)
     refined = Initialisation(light_ev.station_poses().copy(), light_ev.board_poses().copy(),
                              light_ev.board_twists().copy())
     light_median = median_residual(light_ev, light.values)
@@ -124,7 +127,7 @@ def refine_with_imu(problem: GraphProblem, resolution: Resolution, auto: bool,
     limit = IMU_DISAGREEMENT * light_median
     watch = Disagreement.watch(limit) if kind == "combined" and auto else None
     try:
-        fit, ev, cov = build_and_optimise(problem, options, refined, station_covariances,
+        fit, ev, cov = build_and_optimise(problem, options, refined, marginals,
                                           progress, inertial=inertial, gravity=gravity,
                                           levels=light_ev, watch=watch)
         imu_median, spent = median_residual(ev, fit.values), fit.iterations
@@ -142,7 +145,7 @@ def refine_with_imu(problem: GraphProblem, resolution: Resolution, auto: bool,
         resolution = Resolution(options, resolution.applied + (
             "imu_factors = 'twist' (GTSAM's combined factors disagreed with the light)",))
         light = replace(light, iterations=light.iterations + spent)
-        fit, ev, cov = build_and_optimise(problem, options, refined, station_covariances,
+        fit, ev, cov = build_and_optimise(problem, options, refined, marginals,
                                           progress, inertial=inertial, gravity=gravity,
                                           levels=light_ev)
         imu_median = median_residual(ev, fit.values)
