@@ -25,12 +25,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from lhgraph.estimation.graph.block_covariance import (
-    block_length_s,
-    block_sandwich,
-    floor_at,
-    linear_system,
-)
+from lhgraph.estimation.graph.block_covariance import block_length_s, block_sandwich, floor_at
+from lhgraph.estimation.graph.linear_system import linear_system
 from lhgraph.estimation.graph.options import GraphOptions, UncertaintyOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.graph.variables import BOARD_POSE, STATION_POSE, VariableLayout

@@ -68,3 +68,7 @@ class SolveResult:
     sensor_offset_m: NDArray[np.float64] | None = None
     """With the graph's sensor offsets (``sensor_offset_sigma_m``): the correction ``(n_sensors,
     3)`` (m, board frame) of every sensor position of the board file, by board row."""
+    factory_information: dict[str, list] | None = None
+    """With the graph's ``factory_information``: how well the capture determines each
+    station's factory terms (:meth:`lhgraph.estimation.graph.factory_information.
+    FactoryInformation.as_dict`)."""

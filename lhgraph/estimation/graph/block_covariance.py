@@ -11,7 +11,7 @@ covariance of econometrics, the linearised block bootstrap) lets the data say ho
 stations' estimate moves with the part of the path it was seen from:
 
 1. the graph linearised at the result, whitened, robust weights included: ``A``, ``b``
-   (:func:`linear_system`);
+   (:func:`~.linear_system.linear_system`);
 2. ``H = A^T A`` factorised once, in the graph's elimination order (the chain state by state,
    the stations last: little fill); ``Y = H^-1 E`` for the station columns ``E``;
 3. each row's influence on the stations' estimate, ``(A Y)_r b_r``, summed over the rows of
@@ -30,22 +30,20 @@ the method, the choice of block length and what it predicts on the shared record
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-import gtsam
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from lhgraph.estimation.graph.evaluator import FactorEvaluator
+from lhgraph.estimation.graph.factory_information import FactoryInformation, factory_information
+from lhgraph.estimation.graph.linear_system import linear_system, normal_solver
 from lhgraph.estimation.graph.optimizer import OptimizerResult
 from lhgraph.estimation.graph.options import UncertaintyOptions
-from lhgraph.estimation.graph.variables import STATION_POSE, VariableLayout
+from lhgraph.estimation.graph.variables import STATION_POSE
 
 Array = NDArray[np.float64]
-SYMBOL_SHIFT = 56
-"""A GTSAM symbol key holds its character in the top byte, the index below it."""
 
 
 @dataclass(frozen=True)
@@ -53,73 +51,19 @@ class StationCovariances:
     """The stations' 6x6 covariances by slot (tangent order ``[rotation, translation]``):
     ``white`` the graph's marginals, ``honest`` the block sandwich floored at them (equal to
     ``white`` with ``covariance = "white"``); ``method`` the one ``honest`` is,
-    ``block_s`` the block length (s) and ``n_blocks`` their number (0 without blocks)."""
+    ``block_s`` the block length (s) and ``n_blocks`` their number (0 without blocks);
+    ``factory``: the factory terms' information when asked (``factory_information``)."""
 
     white: dict[int, Array]
     honest: dict[int, Array]
     method: str
     block_s: float
     n_blocks: int
+    factory: FactoryInformation | None = None
 
     def summary(self) -> dict[str, float]:
         """The blocks as diagnostics figures."""
         return {"covariance_block_s": self.block_s, "covariance_blocks": float(self.n_blocks)}
-
-
-@dataclass(frozen=True)
-class LinearSystem:
-    """A graph linearised at a point: whitened Jacobian ``A`` (rows x columns, sparse),
-    right-hand side ``b`` (``A dx ~ b``), the first column of each key (``column``) and
-    its dimension (``dim``), and the board state each row belongs to (``row_state``, -1 for
-    rows of no state)."""
-
-    A: sp.csr_matrix
-    b: Array
-    column: dict[int, int]
-    dim: dict[int, int]
-    row_state: NDArray[np.int64]
-
-    def columns(self, keys: list[int]) -> NDArray[np.int64]:
-        """The columns of ``keys``, in order."""
-        return np.concatenate([np.arange(self.column[k], self.column[k] + self.dim[k])
-                               for k in keys]).astype(np.int64)
-
-
-def linear_system(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
-                  layout: VariableLayout) -> LinearSystem:
-    """``graph`` linearised at ``values`` as a sparse system (GTSAM's sparse Jacobian: the
-    keys in ascending order, the right-hand side as last column); each row's board state is
-    the lowest state index among its factor's keys of the chain and leaf families."""
-    linear = graph.linearize(values)
-    i, j, s = linear.sparseJacobian_()
-    rows, cols = i.astype(np.int64) - 1, j.astype(np.int64) - 1
-    n_cols = int(cols.max())
-    n_rows = int(rows.max()) + 1
-    rhs = cols == n_cols
-    b = np.zeros(n_rows)
-    b[rows[rhs]] = s[rhs]
-    A = sp.csr_matrix((s[~rhs], (rows[~rhs], cols[~rhs])), shape=(n_rows, n_cols))
-    zero = values.zeroVectors()
-    column, dim, c = {}, {}, 0
-    for key in sorted(linear.keys()):
-        column[key], dim[key] = c, zero.at(key).shape[0]
-        c += dim[key]
-    if c != n_cols:
-        raise RuntimeError(f"the linearised graph has {n_cols} columns, its keys {c}")
-    per_state = {ord(f.symbol) for f in layout.families if f.elimination in ("chain", "leaf")}
-    row_state = np.full(n_rows, -1, dtype=np.int64)
-    r = 0
-    for f in range(linear.size()):
-        factor = linear.at(f)
-        if factor is None:
-            continue
-        n = factor.rows() if hasattr(factor, "rows") else factor.jacobian()[1].shape[0]
-        states = [k & ((1 << SYMBOL_SHIFT) - 1) for k in factor.keys()
-                  if k >> SYMBOL_SHIFT in per_state]
-        if states:
-            row_state[r:r + n] = min(states)
-        r += n
-    return LinearSystem(A, b, column, dim, row_state)
 
 
 def block_sandwich(A: sp.csr_matrix, b: Array, row_block: NDArray[np.int64],
@@ -130,14 +74,9 @@ def block_sandwich(A: sp.csr_matrix, b: Array, row_block: NDArray[np.int64],
 
     ``row_block``: each row's block (-1: no block, e.g. a prior); ``order``: a column
     permutation that factorises ``H = A^T A`` with little fill (default: as given)."""
-    order = np.arange(A.shape[1]) if order is None else order
-    H = (A.T @ A).tocsc()[order][:, order]
-    lu = spla.splu(H.tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0,
-                   options={"SymmetricMode": True})
     E = np.zeros((A.shape[1], len(columns)))
     E[columns, np.arange(len(columns))] = 1.0
-    Y = np.empty_like(E)
-    Y[order] = lu.solve(E[order])
+    Y = normal_solver(A, order)(E)
     white = Y[columns]
     influence = (A @ Y) * b[:, None]
     used = row_block >= 0
@@ -172,6 +111,15 @@ def station_covariances(fit: OptimizerResult, ev: FactorEvaluator,
     """The stations' white and honest covariances by slot at the optimiser's result ``fit``
     (the graph's ``build_and_optimise`` marginals: see the module docstring)."""
     options = options or UncertaintyOptions()
+    found = station_covariances_only(fit, ev, options)
+    if not options.factory_information:
+        return found
+    return replace(found, factory=factory_information(fit.graph, fit.values, ev))
+
+
+def station_covariances_only(fit: OptimizerResult, ev: FactorEvaluator,
+                             options: UncertaintyOptions) -> StationCovariances:
+    """:func:`station_covariances` without the factory terms' information."""
     slots = list(ev.layout.indices(STATION_POSE))
     white = {slot: fit.covariance(STATION_POSE.key(slot)) for slot in slots}
     t = ev.problem.state_time
@@ -179,20 +127,15 @@ def station_covariances(fit: OptimizerResult, ev: FactorEvaluator,
     if options.covariance == "white" or not slots:
         return StationCovariances(white, dict(white), "white", 0.0, 0)
     system = linear_system(fit.graph, fit.values, ev.layout)
-    order_keys = [k for k in _ordering_keys(ev.layout) if k in system.column]
     columns = system.columns([STATION_POSE.key(slot) for slot in slots])
     last = max(int(np.ceil((t[-1] - t[0]) / block_s)) - 1, 0)
     block = np.where(system.row_state >= 0, np.minimum(
         np.floor((t[np.maximum(system.row_state, 0)] - t[0]) / block_s), last), -1)
     _, sandwich, n = block_sandwich(system.A, system.b, block.astype(np.int64), columns,
-                                    system.columns(order_keys))
+                                    system.elimination_columns(ev.layout))
     if n < 2:
         return StationCovariances(white, dict(white), "white", block_s, n)
     honest = {slot: floor_at(white[slot], sandwich[6 * i:6 * i + 6, 6 * i:6 * i + 6])
               for i, slot in enumerate(slots)}
     return StationCovariances(white, honest, "blocks", block_s, n)
 
-
-def _ordering_keys(layout: VariableLayout) -> list[int]:
-    ordering = layout.elimination_ordering()
-    return [ordering.at(i) for i in range(ordering.size())]

@@ -258,11 +258,15 @@ class UncertaintyOptions:
     one: it covers the residuals' correlation in time, docs/uncertainty.md) or ``"white"``
     (the graph's marginals, which hold for independent residuals only); the white one is
     kept beside it either way. ``covariance_blocks``: the capture is cut into this many
-    time blocks, each at least ``min_block_s`` long."""
+    time blocks, each at least ``min_block_s`` long. ``factory_information``: also how well
+    the capture determines each station's factory terms at the result
+    (:mod:`lhgraph.estimation.graph.factory_information`; the result's
+    ``factory_information``)."""
 
     covariance: str = option("blocks", choices=COVARIANCES)
     covariance_blocks: int = option(30, ge=2, le=10000)
     min_block_s: float = option(0.5, gt=0)
+    factory_information: bool = option(False)
 
     def __post_init__(self) -> None:
         check_fields(self)

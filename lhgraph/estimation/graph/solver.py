@@ -176,5 +176,6 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
         sensor_offset_m=(ev.corrections.sensor_offsets().copy()
                          if options.board.sensor_offset_sigma_m > 0 else None),
         options=options.nested(),
+        factory_information=None if cov.factory is None else cov.factory.as_dict(),
         option_rules=list(resolution.applied),
     )
