@@ -117,6 +117,13 @@ def test_track_reports_residuals_and_fails_on_another_rooms_stations(capture, tm
     out = capsys.readouterr().out
     assert "verdict: FAILED" in out and "the angles do not fit these stations" in out
     assert "another room" in out and "IMU" not in out
+    # streaming: the same verdict, from the residuals of the path as it was reported
+    assert _track(capture, capture / "truth.toml", tmp_path / "s.csv", "--streaming") == 0
+    out = capsys.readouterr().out
+    assert "streaming" in out and "verdict: OK" in out.splitlines()
+    assert _track(capture, other / "truth.toml", tmp_path / "s2.csv", "--streaming") == 3
+    out = capsys.readouterr().out
+    assert "verdict: FAILED" in out and "the angles do not fit these stations" in out
 
 
 def test_track_with_a_gravity_far_from_1_g_fails(tmp_path, capsys):

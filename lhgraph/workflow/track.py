@@ -5,8 +5,10 @@ trajectory CSV (docs/track.md).
 file, nothing written), tracks in batch (:func:`lhgraph.estimation.graph.track.track`) or one
 sync cycle at a time (:func:`lhgraph.estimation.graph.streaming.track_stream`) and writes the
 contract trajectory CSV with the added columns ``lighthouse``, ``hits``, ``sigma_m``
-atomically. A batch track ends with a verdict on its residuals
-(:func:`lhgraph.report.assessment.track_verdict`): the angles fit the stations, or not.
+atomically. A track ends with a verdict on its residuals
+(:func:`lhgraph.report.assessment.track_verdict`): the angles fit the stations, or not (batch:
+the graph's residuals; streaming: those of the path as reported,
+:func:`lhgraph.estimation.graph.path_residuals.path_residuals`).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import numpy as np
 
 from lhgraph.errors import InputError
 from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.path_residuals import path_residuals
 from lhgraph.estimation.graph.streaming import DELAY_S, track_stream
 from lhgraph.estimation.graph.track import TrackedPath, track
 from lhgraph.estimation.result import Residuals
@@ -123,12 +126,17 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
                        imu=stream)
         path, cycle_s, status = result.path, [], result.status
     written = save_trajectory(path.trajectory, output, overwrite, path.columns())
-    if streaming:
-        return TrackOutput(path, written, streaming, cycle_s, status)
     range_m = median_range(path, fixed)
+    calibrated = (fixed.extra.get("verdict") or {}).get("residual_spread_urad")
+    if streaming:
+        # the residuals of the path as reported; each update is one smoother step, with no
+        # convergence to judge
+        residuals = path_residuals(the_board, the_angles, fixed, path, models, options)
+        return TrackOutput(path, written, streaming, cycle_s, status, residuals, range_m,
+                           track_verdict("converged", 0, residuals, range_m,
+                                         calibration_spread_urad=calibrated))
     gravity = None if result.gravity is None else float(np.linalg.norm(result.gravity))
     bias = None if result.imu_bias is None else float(np.linalg.norm(result.imu_bias[3:]))
-    calibrated = (fixed.extra.get("verdict") or {}).get("residual_spread_urad")
     return TrackOutput(path, written, streaming, cycle_s, status, result.residuals, range_m,
                        track_verdict(status, result.iterations, result.residuals, range_m,
                                      gravity, calibrated, bias))
