@@ -21,11 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.compare_pairs import DATA, PAIRS, ROOT, imported
+from benchmarks.compare_pairs import DATA, PAIRS, ROOT, imported, solve_imported
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.layout_compare import compare_layouts
-from lhgraph.workflow.solve import run_config
-from lhgraph.workflow.solve_config import SolveConfig
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -52,9 +50,7 @@ def main(argv: list[str] | None = None) -> int:
                      for i, (kind, path) in enumerate(logs)]
             for n in args.blocks:
                 options = GraphOptions.of(covariance_blocks=n, min_block_s=0.01)
-                results = [run_config(SolveConfig(board=w / "board.toml", angles=w / "angles.csv",
-                                                  calibration=w / "ootx.toml", graph=options))
-                           for w in works]
+                results = [solve_imported(w, options) for w in works]
                 d = compare_layouts(*(r.stations for r in results)).differences[0]
                 length = " / ".join(f"{r.diagnostics['covariance_block_s']:.2f}" for r in results)
                 lines.append(f"| {name} | {n} | {length} | {d.sigma_position_m * 1e3:.2f} / "

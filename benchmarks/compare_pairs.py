@@ -20,6 +20,11 @@ import tempfile
 from datetime import date
 from pathlib import Path
 
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.result import SolveResult
+from lhgraph.workflow.solve import run_config
+from lhgraph.workflow.solve_config import SolveConfig
+
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT.parent / "shared" / "data"
 DEG = 57.29577951308232
@@ -50,6 +55,13 @@ def imported(kind: str, source: Path, work: Path) -> Path:
     if done.returncode:
         raise SystemExit(f"import {source}: {done.stderr.strip()}")
     return work
+
+
+def solve_imported(work: Path, options: GraphOptions) -> SolveResult:
+    """Solve an imported log folder ``work`` with its factory calibration through the Python
+    API (the default graph method under ``options``)."""
+    return run_config(SolveConfig(board=work / "board.toml", angles=work / "angles.csv",
+                                  calibration=work / "ootx.toml", graph=options))
 
 
 def solved(kind: str, source: Path, work: Path) -> Path:

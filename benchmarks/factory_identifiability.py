@@ -25,13 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.compare_pairs import DATA, PAIRS, ROOT, imported
+from benchmarks.compare_pairs import DATA, PAIRS, ROOT, imported, solve_imported
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.result import SolveResult
 from lhgraph.sim.simulate import load_simulation_config, simulate
-from lhgraph.workflow.solve import run_config
-from lhgraph.workflow.solve_config import SolveConfig
 
 CONFIGS = ROOT / "configs" / "simulation"
 OPTIONS = GraphOptions.of(factory_information=True)
@@ -45,12 +43,6 @@ def simulated(name: str, duration_s: float, **motion: object) -> SolveResult:
     sim = simulate(cfg, 1)
     models = {k: s.model for k, s in sim.truth.stations.items()}
     return solve_graph(sim.board, sim.angles, models, OPTIONS)
-
-
-def real(work: Path) -> SolveResult:
-    """Solve an imported log folder with its factory calibration."""
-    return run_config(SolveConfig(board=work / "board.toml", angles=work / "angles.csv",
-                                  calibration=work / "ootx.toml", graph=OPTIONS))
 
 
 def table(name: str, result: SolveResult) -> list[str]:
@@ -93,8 +85,8 @@ def main(argv: list[str] | None = None) -> int:
         logs = {path: kind for pair in PAIRS.values() for kind, path in pair}
         for i, (path, kind) in enumerate(logs.items()):
             if (DATA / path).exists():
-                captures.append((f"real: {path}", lambda path=path, kind=kind, i=i: real(
-                    imported(kind, DATA / path, Path(tmp) / f"log{i}"))))
+                captures.append((f"real: {path}", lambda path=path, kind=kind, i=i: solve_imported(
+                    imported(kind, DATA / path, Path(tmp) / f"log{i}"), OPTIONS)))
             else:
                 lines.append(f"| real: {path} | skipped: data absent | | | | | |")
         for name, run in captures:
