@@ -11,9 +11,8 @@ A recording is text, one event per line: ``<host time s> <device> <type> ...``. 
   length // 2; ``acode & 1`` is the axis).
 
 Timecodes are unwrapped to int64 ticks counted from the device's first ``C`` line.
-The ``.json`` beside a recording holds libsurvive's factory calibration per lighthouse
-(``fcalphase, fcaltilt, fcalcurve, fcalgibpha, fcalgibmag`` as [axis0, axis1], ``id`` as a
-signed 32-bit integer).
+The ``.json`` beside a recording is libsurvive's ``config.json`` (its factory calibration
+and solved poses per lighthouse), read by :mod:`lhgraph.io.libsurvive_config`.
 """
 
 from __future__ import annotations
@@ -28,18 +27,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
-from lhgraph.geometry.transforms import pose_from_quat
-from lhgraph.io.files import unreadable
+from lhgraph.geometry.transforms import make_pose
+from lhgraph.io.libsurvive_config import R_SURVIVE_LH, read_survive_config
 from lhgraph.model.board import Board, make_board
 from lhgraph.model.calibration import StationCalibration
-from lhgraph.model.station import FactoryCalibration
 from lhgraph.signal.pulses import LightPulses
 
 TICK_HZ = 48_000_000
 MAX_CHANNEL = 255
 """The largest raw light channel a libsurvive device's ``channelMap`` may name."""
-_CAL_KEYS = {"phase": "fcalphase", "tilt": "fcaltilt", "curve": "fcalcurve",
-             "gibphase": "fcalgibpha", "gibmag": "fcalgibmag"}
 
 
 @dataclass
@@ -167,28 +163,13 @@ def _unwrap_near(values: NDArray[np.int64], reference: NDArray[np.int64]) -> NDA
 
 
 def read_libsurvive_calibration(path: str | Path) -> dict[int, StationCalibration]:
-    """Factory calibration per libsurvive lighthouse index from a recording's ``.json``."""
-    path = Path(path)
-    try:
-        text = path.read_text(errors="replace")
-    except OSError as exc:
-        raise unreadable(exc, path, "a libsurvive calibration .json") from None
-    out: dict[int, StationCalibration] = {}
-    for m in re.finditer(r'"lighthouse(\d+)"\s*:\s*\{(.*?)\}', text, re.S):
-        body = m.group(2)
-
-        def field(key: str, body: str = body, index: str = m.group(1)) -> list[float]:
-            found = re.search(rf'"{key}"\s*:\s*\[([^\]]*)\]', body)
-            if not found:
-                raise InputError(f"lighthouse{index}: missing '{key}'", path)
-            return [float(v.strip().strip('"')) for v in found.group(1).split(",")]
-
-        id_match = re.search(r'"id"\s*:\s*"?(-?\d+)', body)
-        station_id = int(id_match.group(1)) & 0xFFFFFFFF if id_match else 0
-        cal = FactoryCalibration(**{k: field(v) for k, v in _CAL_KEYS.items()})
-        out[int(m.group(1))] = StationCalibration(cal, station_id)
+    """Factory calibration per libsurvive lighthouse index from a recording's ``.json`` (its
+    ``config.json``: :func:`lhgraph.io.libsurvive_config.read_survive_config`)."""
+    config = read_survive_config(path)
+    out = {k: lh.calibration for k, lh in config.lighthouses.items()
+           if lh.calibration is not None}
     if not out:
-        raise InputError('no "lighthouseN" entries', path)
+        raise InputError("no lighthouse with its factory calibration (OOTXSet 1)", path)
     return out
 
 
@@ -212,15 +193,11 @@ def read_libsurvive_board(path: str | Path, device: str) -> Board:
 
 def read_libsurvive_poses(path: str | Path) -> dict[int, NDArray[np.float64]]:
     """libsurvive's own solved ``T_world_lh`` per lighthouse index from a recording's
-    ``.json`` (its world and lighthouse frames: y up, lighthouse looking along -z)."""
-    text = Path(path).read_text(errors="replace")
-    out = {}
-    for m in re.finditer(r'"lighthouse(\d+)"\s*:\s*\{(.*?)\}', text, re.S):
-        found = re.search(r'"pose"\s*:\s*\[([^\]]*)\]', m.group(2))
-        if found:
-            v = [float(x.strip().strip('"')) for x in found.group(1).split(",")]
-            out[int(m.group(1))] = pose_from_quat(v[:3], v[3:7])
-    return out
+    ``.json``, in libsurvive's frames (its lighthouse frame: x right, y up, looking along
+    -z; :data:`lhgraph.io.libsurvive_config.R_SURVIVE_LH` turns it into ours)."""
+    config = read_survive_config(path)
+    return {k: make_pose(lh.T_world_lh[:3, :3] @ R_SURVIVE_LH.T, lh.T_world_lh[:3, 3])
+            for k, lh in config.lighthouses.items() if lh.T_world_lh is not None}
 
 
 def match_angles(recording: LibsurviveRecording, times_s: NDArray, sensors: NDArray

@@ -1,13 +1,16 @@
-"""``lhgraph export cfclient``: a stations TOML as cfclient's ``system-config.yaml``.
+"""``lhgraph export cfclient`` / ``lhgraph export libsurvive``: a stations TOML as
+cfclient's ``system-config.yaml`` or libsurvive's ``config.json``.
 
-:func:`export_cfclient` reads the stations (and optionally their factory calibration, the
-receiver's IMU stream and trajectory), re-expresses the stations in the world a Crazyflie
-user expects (:mod:`lhgraph.estimation.world_alignment`: z up from gravity, origin and x by
-name), maps our calibration terms to Bitcraze's (:mod:`lhgraph.model.bitcraze`, through
+:func:`prepare_export` reads the stations (and optionally their factory calibration, the
+receiver's IMU stream and trajectory) and re-expresses the stations in the world a user of
+the other tool expects (:mod:`lhgraph.estimation.world_alignment`: z up from gravity,
+origin and x by name). :func:`export_cfclient` then maps our calibration terms to
+Bitcraze's (:mod:`lhgraph.model.bitcraze`, through
 :data:`lhgraph.io.cfclient.CALIBRATION_MAPPINGS`) and writes the file
-(:mod:`lhgraph.io.cfclient`). The file's ``systemType`` is the stations' generation (LH1 or
-LH2, :func:`system_type`). Every input is checked before anything is written.
-docs/export.md describes the options.
+(:mod:`lhgraph.io.cfclient`); :func:`export_libsurvive` writes libsurvive's
+(:mod:`lhgraph.io.libsurvive_config`). The file's system is the stations' generation (LH1
+or LH2, :func:`system_type`). Every input is checked before anything is written.
+docs/export.md and docs/interop.md describe the options.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from lhgraph.estimation.world_alignment import (
 from lhgraph.io.cfclient import SYSTEM_TYPES, SystemConfig, write_system_config
 from lhgraph.io.files import check_writable, read_toml, station_tables
 from lhgraph.io.imu import ImuStream, load_imu
+from lhgraph.io.libsurvive_config import SurviveConfig, SurviveLighthouse, write_survive_config
 from lhgraph.io.stations import Stations, load_stations
 from lhgraph.io.trajectory import Trajectory, load_trajectory
 from lhgraph.model.calibration import StationCalibration, load_calibration
@@ -42,23 +46,39 @@ pose within this of the new world's up (deg)."""
 
 
 @dataclass(frozen=True)
+class PreparedExport:
+    """The stations to export, in the new world (:func:`prepare_export`), with their
+    factory calibrations, generation, how the world was chosen and the warnings so far."""
+
+    stations: Stations
+    calibrations: dict[int, StationCalibration]
+    generation: int
+    alignment: WorldAlignment
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class ExportResult:
-    """What :func:`export_cfclient` wrote: the file, its content, the stations in the new
+    """What an export wrote: the file, its content (our types), the stations in the new
     world and how that world was chosen."""
 
     path: Path
-    config: SystemConfig
+    config: SystemConfig | SurviveConfig
     stations: Stations
     alignment: WorldAlignment
     warnings: tuple[str, ...] = ()
 
     def summary(self) -> str:
         """Two lines for the terminal (the warnings are separate)."""
-        n_cal = len(self.config.calibrations)
-        return (f"wrote {self.path}: {len(self.config.T_world_lh)} station(s), {n_cal} with "
-                f"factory calibration, systemType {self.config.system_type} "
-                f"({SYSTEM_TYPES[self.config.system_type]})\n"
-                f"{self.alignment.summary()}")
+        if isinstance(self.config, SystemConfig):
+            n, system = len(self.config.T_world_lh), self.config.system_type
+            n_cal, label = len(self.config.calibrations), f"systemType {system}"
+        else:
+            n, system = len(self.config.lighthouses), self.config.generation
+            n_cal = sum(lh.calibration is not None for lh in self.config.lighthouses.values())
+            label = f"lighthouse-gen {system}"
+        return (f"wrote {self.path}: {n} station(s), {n_cal} with factory calibration, "
+                f"{label} ({SYSTEM_TYPES[system]})\n{self.alignment.summary()}")
 
 
 def _calibrations_of(stations: Stations, calibrations: dict[int, StationCalibration]
@@ -193,32 +213,27 @@ def _up(options: WorldOptions, stations: Stations,
     return UpEstimate(np.array([0.0, 0.0, 1.0]), "none")
 
 
-def export_cfclient(stations_path: str | Path, output: str | Path, *,
-                    calibration: str | Path | None = None, imu: str | Path | None = None,
-                    trajectory: str | Path | None = None,
-                    options: WorldOptions | None = None,
-                    overwrite: bool = False, unverified: bool = False) -> ExportResult:
-    """Write ``stations_path`` (a stations TOML, LH1 or LH2: :func:`system_type`) as
-    cfclient's ``system-config.yaml``.
+def prepare_export(stations_path: str | Path, *, calibration: str | Path | None = None,
+                   imu: str | Path | None = None, trajectory: str | Path | None = None,
+                   options: WorldOptions | None = None, unverified: bool = False
+                   ) -> PreparedExport:
+    """Read and check what an export needs and move the stations into the new world.
 
-    ``calibration``: an ``ootx.toml`` whose terms become the file's ``calibs`` (and whose
-    accelerometer vectors can give up); ``imu`` (``imu.csv``, board frame) and ``trajectory``
+    ``calibration``: an ``ootx.toml`` (its terms go into the file; its accelerometer
+    vectors can give up); ``imu`` (``imu.csv``, board frame) and ``trajectory``
     (``T_world_board`` in the stations' world, e.g. from ``lhgraph solve --trajectory`` or
-    ``lhgraph track``): the receiver's data for ``up = imu`` and the receiver-start choices.
-    The calibration's terms are written through the mapping of the system type
-    (:data:`lhgraph.io.cfclient.CALIBRATION_MAPPINGS`; LH2: Bitcraze's terms are ours).
-    A result whose ``verdict`` failed (e.g. a solve stopped at its iteration limit) is
-    refused unless ``unverified`` (:func:`verdict_warnings`).
+    ``lhgraph track``): the receiver's data for ``up = imu`` and the receiver-start choices
+    (:func:`check_resting_start`). A result whose ``verdict`` failed (e.g. a solve stopped
+    at its iteration limit) is refused unless ``unverified`` (:func:`verdict_warnings`).
     """
     options = options or WorldOptions()
-    output = check_writable(output, overwrite, create_parents=False)
     if imu is not None and trajectory is None:
         raise InputError("--imu needs --trajectory: the receiver's poses carry its "
                          "accelerometer into the stations' world")
     stations = load_stations(stations_path)
     verdict_notes = verdict_warnings(stations, stations_path, unverified)
     calibrations = None if calibration is None else load_calibration(calibration)
-    system = system_type(stations, stations_path, calibrations, calibration)
+    generation = system_type(stations, stations_path, calibrations, calibration)
     stream = None if imu is None else load_imu(imu)
     path_poses = None if trajectory is None else load_trajectory(trajectory)
     up = _up(options, stations, calibrations, stream, path_poses)
@@ -228,8 +243,53 @@ def export_cfclient(stations_path: str | Path, output: str | Path, *,
     moved = transform_stations(stations, alignment.T_new_w)
     calibs, warnings = ({}, []) if calibrations is None else _calibrations_of(
         stations, calibrations)
-    config = SystemConfig(system, {k: moved.pose(k) for k in moved.indices()}, calibs)
+    return PreparedExport(moved, calibs, generation, alignment,
+                          tuple(verdict_notes + warnings))
+
+
+def export_cfclient(stations_path: str | Path, output: str | Path, *,
+                    calibration: str | Path | None = None, imu: str | Path | None = None,
+                    trajectory: str | Path | None = None,
+                    options: WorldOptions | None = None,
+                    overwrite: bool = False, unverified: bool = False) -> ExportResult:
+    """Write ``stations_path`` (a stations TOML, LH1 or LH2: :func:`system_type`) as
+    cfclient's ``system-config.yaml`` (the other arguments: :func:`prepare_export`). The
+    calibration's terms are written through the mapping of the system type
+    (:data:`lhgraph.io.cfclient.CALIBRATION_MAPPINGS`; LH2: Bitcraze's terms are ours).
+    """
+    output = check_writable(output, overwrite, create_parents=False)
+    ready = prepare_export(stations_path, calibration=calibration, imu=imu,
+                           trajectory=trajectory, options=options, unverified=unverified)
+    moved = ready.stations
+    config = SystemConfig(ready.generation, {k: moved.pose(k) for k in moved.indices()},
+                          ready.calibrations)
     path = write_system_config(config, output, overwrite)
     moved = dataclasses.replace(moved, extra={**moved.extra, "world": "cfclient"})
-    return ExportResult(path, config, moved, alignment,
-                        tuple(verdict_notes + warnings))
+    return ExportResult(path, config, moved, ready.alignment, ready.warnings)
+
+
+def export_libsurvive(stations_path: str | Path, output: str | Path, *,
+                      calibration: str | Path | None = None, imu: str | Path | None = None,
+                      trajectory: str | Path | None = None,
+                      options: WorldOptions | None = None,
+                      overwrite: bool = False, unverified: bool = False) -> ExportResult:
+    """Write ``stations_path`` (a stations TOML, LH1 or LH2) as libsurvive's
+    ``config.json`` (:mod:`lhgraph.io.libsurvive_config`; the other arguments:
+    :func:`prepare_export`): each station's pose in libsurvive's lighthouse frame, its
+    covariance as libsurvive's world-axis variances, its factory calibration (OOTX values,
+    ``OOTXSet`` 1) and ``mode`` (LH2: channel - 1; LH1: the station index)."""
+    output = check_writable(output, overwrite, create_parents=False)
+    ready = prepare_export(stations_path, calibration=calibration, imu=imu,
+                           trajectory=trajectory, options=options, unverified=unverified)
+    lighthouses = {}
+    for k in ready.stations.indices():
+        station = ready.stations.stations[k]
+        cal = ready.calibrations.get(k)
+        channel = cal.channel if cal is not None else station.model.channel
+        mode = channel - 1 if ready.generation == 2 and channel is not None else k
+        lighthouses[k] = SurviveLighthouse(station.T_world_lh, station.covariance, cal, mode)
+    config = SurviveConfig(ready.generation, lighthouses)
+    path = write_survive_config(config, output, overwrite)
+    moved = dataclasses.replace(ready.stations,
+                                extra={**ready.stations.extra, "world": "libsurvive"})
+    return ExportResult(path, config, moved, ready.alignment, ready.warnings)
