@@ -67,7 +67,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not getattr(args, "quiet", False):
             print(f"lhgraph {args.command}: created output folder {folder}", file=sys.stderr)
 
-    inputs = [getattr(args, dest, None) for dest in getattr(args, "_inputs", ())]
+    inputs = []
+    for dest in getattr(args, "_inputs", ()):
+        value = getattr(args, dest, None)
+        inputs += value if isinstance(value, list) else [value]
     try:
         with guard_inputs(inputs, created):
             return int(args._run(args) or 0)

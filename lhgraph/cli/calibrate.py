@@ -66,7 +66,11 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        "(docs/solve.md). Either a CONFIG.toml or --board/--angles/--output.")
     p.add_argument("config", nargs="?", help="solve configuration TOML")
     p.add_argument("--board", help="board TOML")
-    p.add_argument("--angles", help="angles CSV")
+    p.add_argument("--angles", action="append",
+                   help="angles CSV; repeated: several captures of the same stations solved "
+                   "jointly, one board path each (docs/solve.md)")
+    p.add_argument("--prior", help="an earlier stations TOML: its poses and covariances as "
+                   "priors on the stations (docs/solve.md)")
     p.add_argument("--output", "-o", help="stations TOML to write (with a CONFIG: a path "
                    "without .toml or an existing directory = a run directory, docs/workflow.md)")
     p.add_argument("--method", choices=METHODS, help="default: graph")
@@ -90,7 +94,7 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    "inputs and options, compute the rest")
     add_common_output(p)
     add_verbose(p)
-    mark_inputs(p, "config", "board", "angles", "calibration", "truth", "imu")
+    mark_inputs(p, "config", "board", "angles", "calibration", "truth", "imu", "prior")
     return p
 
 
@@ -113,7 +117,7 @@ def run_solve(args: argparse.Namespace) -> int:
 
     flags = {f"--{name}": (name, getattr(args, name))
              for name in ("output", "method", "trajectory", "calibration", "truth", "reference",
-                          "world", "imu")}
+                          "world", "imu", "prior")}
     flags["--duration"] = ("duration_s", args.duration)
     flags["--board-output"] = ("board_output", args.board_output)
     if args.config:
@@ -124,7 +128,9 @@ def run_solve(args: argparse.Namespace) -> int:
             raise InputError("give a CONFIG.toml or all of --board, --angles, --output "
                              f"(missing: {', '.join('--' + m for m in missing)})")
         config = SolveConfig(board=Path(args.board))
-        flags["--angles"] = ("angles", args.angles)
+    if args.angles:
+        flags["--angles"] = ("angles", args.angles[0])
+        config = replace(config, more_angles=tuple(Path(a) for a in args.angles[1:]))
     config = override(config, flags)
     if args.method is not None:
         config = replace(config, methods=None)

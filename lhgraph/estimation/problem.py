@@ -28,6 +28,20 @@ class GraphProblem:
     bounds: NDArray[np.int64]         # (K + 1,) hit slice of state k = bounds[k]:bounds[k+1]
     hit_sensor: NDArray[np.int64]     # (N,) board row of each sorted hit's sensor
     n_sensors: int                    # the board's sensor count
+    state_capture: NDArray[np.int64] | None = None
+    """(K,) capture of each state when the angles join several captures (their ``capture``
+    column, :mod:`lhgraph.io.captures`): no motion prior links states of two captures."""
+    station_priors: dict[int, tuple[Array, Array, Array]] | None = None
+    """Station slot -> (``T_world_lh``, the 6x6 covariance that weighs it, the honest one):
+    an earlier result's prior on that station (:mod:`lhgraph.estimation.station_prior`);
+    None: none."""
+
+    def linked(self) -> NDArray[np.bool_]:
+        """(K - 1,) whether states k and k + 1 belong to one capture (a motion prior links
+        them)."""
+        if self.state_capture is None:
+            return np.ones(max(self.n_states - 1, 0), dtype=bool)
+        return self.state_capture[1:] == self.state_capture[:-1]
 
     @property
     def n_states(self) -> int:
@@ -66,9 +80,12 @@ def build_problem(board: Board, angles: Angles, models: dict[int, StationModel],
     )
     bounds = np.searchsorted(state, np.arange(n_sweeps + 1))
     state_station = station_slot[bounds[:-1]]
+    capture = angles.extra.get("capture")
+    state_capture = (None if capture is None else
+                     np.asarray(capture, dtype=np.int64)[rows][bounds[:-1]])
     return GraphProblem(station_ids, [models.get(s, StationModel()) for s in station_ids],
                         state_time, state_station, hits, rows, bounds,
-                        sensor_rows[rows], len(board.positions))
+                        sensor_rows[rows], len(board.positions), state_capture)
 
 
 def expand_ranges(first: NDArray[np.int64], count: NDArray[np.int64]

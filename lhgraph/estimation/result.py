@@ -65,6 +65,10 @@ class SolveResult:
     :func:`~lhgraph.estimation.graph.resolve.resolve_options`; None for other methods)."""
     option_rules: list[str] = field(default_factory=list)
     """One line per rule that changed the options given (the graph's)."""
+    captures: list[str] = field(default_factory=list)
+    """With several captures joined (:mod:`lhgraph.io.captures`) or an earlier result as a
+    prior: one line per capture (the stations it saw) and per prior station (used, or the
+    prior's alone)."""
     sensor_offset_m: NDArray[np.float64] | None = None
     """With the graph's sensor offsets (``sensor_offset_sigma_m``): the correction ``(n_sensors,
     3)`` (m, board frame) of every sensor position of the board file, by board row."""

@@ -68,6 +68,7 @@ def format_solution(result: SolveResult, errors: list[PoseError] | None = None) 
                      f"(inliers), inlier fraction {r.inlier_fraction():.3f}")
     if result.timings_s:
         lines.append("time: " + ", ".join(f"{k} {v:.3f} s" for k, v in result.timings_s.items()))
+    lines.extend(result.captures)
     for w in result.warnings:
         lines.append(f"warning: {w}")
     if errors:

@@ -16,10 +16,13 @@ from numpy.typing import NDArray
 
 from lhgraph.errors import InputError
 from lhgraph.estimation.gravity import up_vectors
+from lhgraph.estimation.station_prior import StationPriors, station_priors
 from lhgraph.estimation.sweep_times import swept_generations
 from lhgraph.io.angles import Angles, load_angles
+from lhgraph.io.captures import capture_lines, join_captures
 from lhgraph.io.files import protect_inputs
 from lhgraph.io.imu import ImuStream, load_imu
+from lhgraph.io.stations import load_stations
 from lhgraph.model.board import Board, load_board
 from lhgraph.model.calibration import StationCalibration, load_calibration
 from lhgraph.model.station import Convention, StationModel
@@ -84,15 +87,20 @@ class SolveInputs:
     notes: list[str] = field(default_factory=list)
     world_up: dict[int, NDArray[np.float64]] | None = None
     imu: ImuStream | None = None
+    prior: StationPriors | None = None
+    captures: list[str] = field(default_factory=list)
+    """With several captures: a line per capture (its stations and hits) and the joining's
+    notes."""
 
 
 def check_inputs(config: SolveConfig) -> None:
     """InputError unless every input file the config names exists and is a file (run before
     any output is created, so a bad input leaves nothing behind)."""
-    names = ("board", "angles", "capture", "calibration", "truth", "imu")
-    protect_inputs([config.path, *(getattr(config, name) for name in names)])
-    for name in names:
-        path = getattr(config, name)
+    names = ("board", "angles", "capture", "calibration", "truth", "imu", "prior")
+    named = [(name, getattr(config, name)) for name in names]
+    named += [("angles", more) for more in config.more_angles]
+    protect_inputs([config.path, *(path for _, path in named)])
+    for name, path in named:
         if path is None:
             continue
         if not path.exists():
@@ -106,6 +114,7 @@ def load_inputs(config: SolveConfig) -> SolveInputs:
     check_inputs(config)
     board = load_board(config.board)
     notes: list[str] = []
+    captures: list[str] = []
     calibrations = load_calibration(config.calibration) if config.calibration else {}
     if config.capture is not None:
         from lhgraph.signal.formats import decode_file
@@ -119,6 +128,8 @@ def load_inputs(config: SolveConfig) -> SolveInputs:
     elif config.angles is not None:
         angles = load_angles(config.angles)
         source = config.angles
+        if config.more_angles:
+            angles, captures = _joined(config, board, angles)
     else:
         raise InputError("no angles: give 'angles' or 'capture'", config.path, "angles")
     angles.check_board(board, source)
@@ -139,4 +150,27 @@ def load_inputs(config: SolveConfig) -> SolveInputs:
                              "receiver's IMU (imu, --imu): none given",
                              config.calibration or config.capture or config.path, "world")
     imu = None if config.imu is None else load_imu(config.imu)
-    return SolveInputs(board, angles, models_of(calibrations), notes, world_up, imu)
+    prior = None
+    if config.prior is not None:
+        reference = config.reference if config.reference is not None else min(
+            angles.stations())
+        prior = station_priors(load_stations(config.prior), reference, config.prior)
+    return SolveInputs(board, angles, models_of(calibrations), notes, world_up, imu, prior,
+                       captures)
+
+
+def _joined(config: SolveConfig, board: Board, first: Angles) -> tuple[Angles, list[str]]:
+    """The config's captures joined into one table (:func:`join_captures`), and a line per
+    capture; InputError for what a joint solve does not take yet (an IMU, a duration)."""
+    for key, value in (("imu", config.imu), ("duration", config.duration_s)):
+        if value is not None:
+            raise InputError(f"several captures (angles) do not take '{key}' yet: solve "
+                             "them without it, or one capture at a time", config.path, key)
+    captures, names = [first], [config.angles]
+    for path in config.more_angles:
+        more = load_angles(path)
+        more.check_board(board, path)
+        captures.append(more)
+        names.append(path)
+    joined, spans, notes = join_captures(captures, names)
+    return joined, capture_lines(spans) + notes

@@ -41,7 +41,7 @@ from lhgraph.report.assessment import (
     view_points,
 )
 from lhgraph.workflow.inputs import SolveInputs, check_inputs, load_inputs
-from lhgraph.workflow.solve import solve, with_verdict
+from lhgraph.workflow.solve import run_config, with_verdict
 from lhgraph.workflow.solve_config import SolveConfig
 
 RUN_FILES = ("stations.toml", "trajectory.csv", "residuals.csv", "summary.json", "report.html")
@@ -197,6 +197,7 @@ def summarise(config: SolveConfig, inputs: SolveInputs, result: SolveResult,
         "errors": error_summary(errors) if errors is not None else None,
         "timings_s": {"load": load_s, **result.timings_s},
         "warnings": result.warnings,
+        "captures": result.captures,
         "diagnostics": result.diagnostics,
         "coverage": {str(k): coverage(view_points(inputs.angles, k))
                      for k in inputs.angles.stations()},
@@ -354,9 +355,7 @@ def _run_method(config: SolveConfig, inputs: SolveInputs, method: str, folder: P
     """Solve one method and write its files, ``summary.json`` last (the mark that it
     finished); the paths written are appended to ``files``."""
     say(f"[{method}] solving")
-    result = solve(inputs.board, inputs.angles, method, inputs.models, config.reference,
-                   config.graph_options(), lambda msg: say(f"[{method}] {msg}"),
-                   world_up=inputs.world_up, imu=inputs.imu)
+    result = run_config(config, lambda msg: say(f"[{method}] {msg}"), inputs, method)
     errors = station_errors(truth, result.stations) if truth is not None else None
     summary = summarise(config, inputs, result, errors, hashes, load_s)
     files.append(save_stations(with_verdict(result.stations, run_verdict(summary)),

@@ -24,6 +24,7 @@ from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.gravity import imu_up, to_gravity_world, up_angle_deg
 from lhgraph.estimation.metrics import PoseError, station_errors
 from lhgraph.estimation.result import SolveResult
+from lhgraph.estimation.station_prior import StationPriors
 from lhgraph.io.angles import Angles
 from lhgraph.io.files import check_writable
 from lhgraph.io.imu import ImuStream
@@ -45,8 +46,11 @@ def solve(board: Board, angles: Angles, method: str = "graph",
           progress: Callable[[str], None] | None = None,
           paper_options: PaperOptions | None = None,
           world_up: dict[int, NDArray[np.float64]] | None = None,
-          imu: ImuStream | None = None) -> SolveResult:
+          imu: ImuStream | None = None, prior: StationPriors | None = None) -> SolveResult:
     """Calibrate the stations seen in ``angles`` with ``method`` ("graph" or "paper").
+
+    ``prior``: an earlier result as a prior on the stations (the graph only: InputError for
+    the paper's method; :func:`lhgraph.estimation.station_prior.station_priors`).
 
     ``imu``: the receiver's IMU stream, for the graph's IMU refinement (the paper's method
     has no use for it: InputError). The paper's method is for LH1 stations, as the paper's
@@ -65,8 +69,11 @@ def solve(board: Board, angles: Angles, method: str = "graph",
         options = graph_options or GraphOptions()
         if reference is not None:
             options = options.with_values(reference=reference)
-        result = solve_graph(board, angles, models, options, progress, imu=imu)
+        result = solve_graph(board, angles, models, options, progress, imu=imu, prior=prior)
     elif method == "paper":
+        if prior is not None:
+            raise InputError("the paper's method takes no prior: drop 'prior' (--prior) or "
+                             "solve with the graph", where="prior")
         if imu is not None:
             raise InputError("the paper's method does not use an IMU: drop 'imu' (--imu) or "
                              "solve with the graph", where="imu")
@@ -113,12 +120,16 @@ def write_solution(result: SolveResult, output: str | Path, trajectory: str | Pa
 
 
 def run_config(config: SolveConfig, progress: Callable[[str], None] | None = None,
-               inputs: SolveInputs | None = None) -> SolveResult:
-    """Solve with a config's (first) method, the inputs it names loaded unless given."""
+               inputs: SolveInputs | None = None, method: str | None = None) -> SolveResult:
+    """Solve with ``method`` (default: the config's first), the inputs the config names
+    loaded unless given; the result's ``captures`` start with the joined captures' lines."""
     inputs = inputs or load_inputs(config)
-    return solve(inputs.board, inputs.angles, config.method_list()[0], inputs.models,
-                 config.reference, config.graph_options(), progress,
-                 world_up=inputs.world_up, imu=inputs.imu)
+    result = solve(inputs.board, inputs.angles, method or config.method_list()[0],
+                   inputs.models, config.reference, config.graph_options(), progress,
+                   world_up=inputs.world_up, imu=inputs.imu, prior=inputs.prior)
+    if not inputs.captures:
+        return result
+    return dataclasses.replace(result, captures=inputs.captures + result.captures)
 
 
 def solve_to_files(config: SolveConfig, overwrite: bool = False,

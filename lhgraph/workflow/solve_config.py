@@ -35,7 +35,11 @@ class SolveConfig:
     ``imu`` the receiver's ``imu.csv`` (board frame, the angles' clock): the graph refines its
     solution with IMU factors (:func:`lhgraph.estimation.graph.solver.solve_graph`);
     ``board_output`` a board TOML to write with the sensor positions the graph solved for
-    (:meth:`graph_options`: the sensor offsets are then on).
+    (:meth:`graph_options`: the sensor offsets are then on); ``more_angles`` the angles of
+    further captures solved jointly with ``angles`` (a list ``angles = [A, B, ...]`` in the
+    file, ``--angles`` repeated: :func:`lhgraph.io.captures.join_captures`); ``prior`` an
+    earlier stations TOML whose poses and covariances become priors on the stations
+    (:mod:`lhgraph.estimation.station_prior`).
     """
 
     board: Path = option(kind=Path)
@@ -55,6 +59,8 @@ class SolveConfig:
     world: str = option("reference", choices=WORLDS)
     imu: Path | None = option(None, kind=Path)
     board_output: Path | None = option(None, kind=Path)
+    more_angles: tuple[Path, ...] = ()
+    prior: Path | None = option(None, kind=Path)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -96,8 +102,16 @@ def load_solve_config(path: str | Path) -> SolveConfig:
         raise InputError("give exactly one of 'angles' and 'capture'", path,
                          "angles" if "angles" in table else "capture")
     board = table.path("board", required=True)
+    more: tuple[Path, ...] = ()
+    if isinstance(table.data.get("angles"), list):
+        listed = table.get("angles")
+        if len(listed) < 1 or not all(isinstance(a, str) for a in listed):
+            raise InputError("expected a path or a non-empty list of paths", path, "angles")
+        first, *rest = (path.parent / a for a in listed)
+        more = tuple(rest)
+        table.data = {**table.data, "angles": str(first)}
     values = {name: table.value(name, rule, None) for name, rule in declared.items()
               if name != "board"}
     given = {k: v for k, v in values.items() if v is not None}
     return SolveConfig(board=board, graph=table.options("graph", GraphOptions),
-                       methods=methods, path=path, **given)
+                       methods=methods, path=path, more_angles=more, **given)

@@ -18,7 +18,10 @@ stations' estimate moves with the part of the path it was seen from:
    each time block of the capture (the rows of a board state's factors belong to its block,
    the priors of variables of no state to none): the block scores ``g_c``;
 4. ``sandwich = C / (C - 1) sum_c (g_c - mean g)(g_c - mean g)^T`` over the ``C`` blocks
-   (:func:`block_sandwich`);
+   (:func:`block_sandwich`), plus, for the rows of an earlier result's station priors
+   (``lhgraph solve --prior``: information from outside this capture, weighed by its white
+   covariance), their expected share ``(A Y)_p^T C_p (A Y)_p`` with ``C_p`` the covariance
+   of the whitened prior residual its honest covariance implies;
 5. the *honest* covariance is the sandwich, never narrower than the white one in any
    direction (:func:`floor_at`): with white residuals the two agree up to the sandwich's own
    scatter, with correlated ones the sandwich is the wider.
@@ -38,6 +41,7 @@ from numpy.typing import NDArray
 
 from lhgraph.estimation.graph.evaluator import FactorEvaluator
 from lhgraph.estimation.graph.factory_information import FactoryInformation, factory_information
+from lhgraph.estimation.graph.families.station_prior import StationPriorFactors
 from lhgraph.estimation.graph.linear_system import linear_system, normal_solver
 from lhgraph.estimation.graph.optimizer import OptimizerResult
 from lhgraph.estimation.graph.options import UncertaintyOptions
@@ -67,13 +71,17 @@ class StationCovariances:
 
 
 def block_sandwich(A: sp.csr_matrix, b: Array, row_block: NDArray[np.int64],
-                   columns: NDArray[np.int64], order: NDArray[np.int64] | None = None
-                   ) -> tuple[Array, Array, int]:
+                   columns: NDArray[np.int64], order: NDArray[np.int64] | None = None,
+                   expected: NDArray[np.bool_] | None = None,
+                   expected_cov: Array | None = None) -> tuple[Array, Array, int]:
     """The white covariance ``[H^-1]`` and the block sandwich of the parameters ``columns``
     of the least-squares problem ``A x ~ b`` (whitened), and the number of blocks.
 
     ``row_block``: each row's block (-1: no block, e.g. a prior); ``order``: a column
-    permutation that factorises ``H = A^T A`` with little fill (default: as given)."""
+    permutation that factorises ``H = A^T A`` with little fill (default: as given);
+    ``expected``: rows (of no block) whose share is added at its model's value,
+    ``(A Y)_e^T C (A Y)_e`` with ``C`` = ``expected_cov`` (the covariance of those whitened
+    rows; default the identity), instead of from their residuals."""
     E = np.zeros((A.shape[1], len(columns)))
     E[columns, np.arange(len(columns))] = 1.0
     Y = normal_solver(A, order)(E)
@@ -86,6 +94,10 @@ def block_sandwich(A: sp.csr_matrix, b: Array, row_block: NDArray[np.int64],
     scores -= scores.mean(axis=0)
     n = len(blocks)
     sandwich = scores.T @ scores * (n / max(n - 1, 1))
+    if expected is not None and np.any(expected):
+        AY = (A @ Y)[expected]
+        C = np.eye(len(AY)) if expected_cov is None else expected_cov
+        sandwich = sandwich + AY.T @ C @ AY
     return 0.5 * (white + white.T), sandwich, n
 
 
@@ -131,8 +143,19 @@ def station_covariances_only(fit: OptimizerResult, ev: FactorEvaluator,
     last = max(int(np.ceil((t[-1] - t[0]) / block_s)) - 1, 0)
     block = np.where(system.row_state >= 0, np.minimum(
         np.floor((t[np.maximum(system.row_state, 0)] - t[0]) / block_s), last), -1)
+    on_stations = np.zeros(system.A.shape[1])
+    on_stations[columns] = 1.0
+    magnitude = abs(system.A)
+    station_only = (magnitude @ on_stations > 0) & np.isclose(
+        magnitude @ on_stations, np.asarray(magnitude.sum(axis=1)).ravel())
+    priors = next((f for f in ev.families if isinstance(f, StationPriorFactors)), None)
+    prior_rows = (system.row_state < 0) & station_only
+    expected_cov = None if priors is None else sp.block_diag(priors.whitened_errors()).toarray()
+    if expected_cov is not None and expected_cov.shape[0] != int(prior_rows.sum()):
+        raise RuntimeError("the station priors' rows do not match their factors")
     _, sandwich, n = block_sandwich(system.A, system.b, block.astype(np.int64), columns,
-                                    system.elimination_columns(ev.layout))
+                                    system.elimination_columns(ev.layout), prior_rows,
+                                    expected_cov)
     if n < 2:
         return StationCovariances(white, dict(white), "white", block_s, n)
     honest = {slot: floor_at(white[slot], sandwich[6 * i:6 * i + 6, 6 * i:6 * i + 6])

@@ -12,7 +12,10 @@ order their factors go into the graph (:mod:`lhgraph.estimation.graph.families`)
 4. with an IMU stream: ``imu_factors`` resolving to ``"combined"``, GTSAM's preintegrated
    combined IMU factors (:class:`~lhgraph.estimation.imu.families.CombinedImuFamily`), to
    ``"twist"`` the gyro, accelerometer and preintegrated gyro factors on the twists
-   (:class:`~lhgraph.estimation.imu.families.TwistImu`).
+   (:class:`~lhgraph.estimation.imu.families.TwistImu`);
+5. with an earlier result as a prior (the problem's ``station_priors``) and station
+   variables: a prior factor per station it holds
+   (:class:`~.families.station_prior.StationPriorFactors`).
 
 Adding a family: one module implementing :class:`~.families.base.FactorFamily`, one line
 here (docs/architecture.md walks through it).
@@ -29,9 +32,11 @@ from lhgraph.estimation.graph.families.base import FactorFamily
 from lhgraph.estimation.graph.families.bearing import Bearings
 from lhgraph.estimation.graph.families.corrections import BoardCorrections
 from lhgraph.estimation.graph.families.motion import MotionPrior
+from lhgraph.estimation.graph.families.station_prior import StationPriorFactors
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.variables import (
+    STATION_POSE,
     VariableLayout,
     diode_bias_family,
     sensor_offset_family,
@@ -73,6 +78,8 @@ def factor_families(problem: GraphProblem, layout: VariableLayout, options: Grap
                                           options))
     elif inertial is not None:
         families.append(TwistImu(inertial, layout, options))
+    if problem.station_priors and len(layout.indices(STATION_POSE)):
+        families.append(StationPriorFactors(problem, layout))
     return families
 
 

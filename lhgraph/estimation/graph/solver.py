@@ -32,6 +32,7 @@ from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser, chain_to_re
 from lhgraph.estimation.problem import GraphProblem, build_problem
 from lhgraph.estimation.rests import thin_rests
 from lhgraph.estimation.result import Residuals, SolveResult
+from lhgraph.estimation.station_prior import StationPriors
 from lhgraph.io.angles import Angles
 from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import Station, Stations
@@ -44,8 +45,8 @@ Progress = Callable[[str], None]
 
 def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | None = None,
                 options: GraphOptions | None = None, progress: Progress | None = None,
-                initialiser: Initialiser | None = None, imu: ImuStream | None = None
-                ) -> SolveResult:
+                initialiser: Initialiser | None = None, imu: ImuStream | None = None,
+                prior: StationPriors | None = None) -> SolveResult:
     """Calibrate every station's pose ``T_world_lh`` by the joint factor graph.
 
     ``angles`` as measured (rad, before factory correction), ``models`` the station models by
@@ -61,7 +62,11 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     factors (:func:`~lhgraph.estimation.imu.refinement.refine_with_imu`). With
     ``options.data.rest_keep_every`` > 1 the board's rests are thinned first
     (:func:`~lhgraph.estimation.rests.thin_rests`; the hits left out are counted in
-    ``diagnostics["rest_hits_dropped"]``).
+    ``diagnostics["rest_hits_dropped"]``). Angles that join several captures (a
+    ``capture`` column, :func:`lhgraph.io.captures.join_captures`) get one board trajectory
+    per capture. ``prior``: an earlier result in this solve's world
+    (:func:`lhgraph.estimation.station_prior.station_priors`), a prior factor on each
+    station it holds; a station only the prior holds is the prior's in the result.
     """
     options = options or GraphOptions()
     models = models or {}
@@ -87,6 +92,13 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
     resolution = resolve_options(options, facts)
     say_resolution(resolution, progress)
     problem = build_problem(board, angles, models, reference)
+    if prior is not None:
+        if prior.reference != reference:
+            raise SolverError(f"the prior is in station {prior.reference}'s frame, the solve "
+                              f"in station {reference}'s")
+        problem = replace(problem, station_priors={
+            slot: prior.priors[sid] for slot, sid in enumerate(problem.station_ids)
+            if sid in prior.priors})
     if initialiser is None:
         initialiser = (FewDiodeInitialiser() if facts.few_diode
                        else PnPKabschInitialiser(imu=imu))
@@ -113,8 +125,40 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         extra |= refined.diagnostics
     timings["optimise"] = time.perf_counter() - t1
     ev.evaluate(fit.values)
-    return _result(angles, problem, ev, fit, cov, resolution, timings, t0, init.parents, extra,
-                   notes)
+    result = _result(angles, problem, ev, fit, cov, resolution, timings, t0, init.parents,
+                     extra, notes)
+    return with_prior_only(result, prior, models) if prior is not None else result
+
+
+PRIOR_CHI2_WARN = 22.46
+"""A station's prior chi2 (6 dof, in the prior's honest covariance) above this (the 99.9 %
+point) is a warning: the capture puts it where the earlier result says it is not."""
+
+
+def with_prior_only(result: SolveResult, prior: StationPriors,
+                    models: dict[int, StationModel]) -> SolveResult:
+    """``result`` with the stations only the prior holds (its pose and covariance), a line
+    per prior station and a warning for each the capture disagrees with."""
+    reference = result.stations.reference
+    slots = [reference] + [k for k in sorted(result.stations.stations) if k != reference]
+    stations = dict(result.stations.stations)
+    lines, warnings = [], list(result.warnings) + list(prior.notes)
+    for sid in sorted(prior.priors):
+        T, white, honest = prior.priors[sid]
+        if sid not in stations:
+            stations[sid] = Station(T.copy(), honest.copy(), models.get(sid, StationModel()),
+                                    white.copy())
+            lines.append(f"prior: station {sid} not seen by this capture: the prior's pose "
+                         "and covariance")
+            continue
+        chi2 = result.diagnostics.get(f"station_prior_chi2_{slots.index(sid)}", float("nan"))
+        lines.append(f"prior: station {sid} refined by this capture (its prior's chi2 "
+                     f"{chi2:.1f}, 6 dof)")
+        if chi2 > PRIOR_CHI2_WARN:
+            warnings.append(f"station {sid} lies {np.sqrt(chi2):.1f} sigma from the prior "
+                            f"(chi2 {chi2:.1f} for 6 dof): moved since it was calibrated?")
+    return replace(result, stations=replace(result.stations, stations=stations),
+                   warnings=warnings, captures=list(result.captures) + lines)
 
 
 def say_resolution(resolution: Resolution, progress: Progress | None) -> None:

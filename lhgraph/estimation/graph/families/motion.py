@@ -3,7 +3,8 @@
 White noise on acceleration (:func:`lhgraph.estimation.residuals.motion_residuals`, its
 covariance :func:`~lhgraph.estimation.residuals.wnoa_covariance` of the power spectral
 densities ``accel_psd_rot`` (rad^2/s^3) and ``accel_psd_pos`` (m^2/s^3)), keys
-:func:`motion_keys`.
+:func:`motion_keys`; none between the last state of one capture and the first of the next
+when the problem joins several (:meth:`GraphProblem.linked`).
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ class MotionPrior(FactorFamily):
     def __init__(self, problem: GraphProblem, psd: tuple[float, float]):
         self._psd = psd
         self._dt = np.diff(problem.state_time)
+        self._linked = problem.linked()
         self.covariances = wnoa_covariance(self._dt, *psd)
         """``(K - 1, 12, 12)`` covariance of each prior at the configured PSDs (the factors'
         noise models)."""
@@ -60,7 +62,7 @@ class MotionPrior(FactorFamily):
 
     def add_to(self, graph: gtsam.NonlinearFactorGraph, ensure: Ensure) -> None:
         first = graph.size()
-        for k in range(len(self._dt)):
+        for k in np.flatnonzero(self._linked).tolist():
             graph.add(motion_factor(k, self.covariances[k], indexed_callback(
                 ensure, (k, k + 1), k, self, lambda: self._e, lambda: self._He)))
         self.indices = range(first, graph.size())
@@ -85,8 +87,10 @@ class MotionPrior(FactorFamily):
         return float(0.5 * self.chi2().sum())
 
     def chi2(self) -> Array:
-        """Whitened squared residual ``e^T Q^-1 e`` of every prior (K-1,)."""
-        return np.einsum("ki,kij,kj->k", self._e, self._Q_inv, self._e)
+        """Whitened squared residual ``e^T Q^-1 e`` of every prior in the graph (the linked
+        pairs of states)."""
+        chi2 = np.einsum("ki,kij,kj->k", self._e, self._Q_inv, self._e)
+        return chi2[self._linked]
 
     def scale(self, factor: float) -> None:
         """Multiply the prior's covariance by ``factor`` (before the first evaluation
