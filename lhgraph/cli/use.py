@@ -9,10 +9,13 @@ from lhgraph.choices import RENDERERS
 from lhgraph.cli.common import (
     COMMANDS,
     add_common_output,
+    at_least,
     mark_inputs,
     print_verdict,
     verdict_exit,
 )
+from lhgraph.errors import InputError
+from lhgraph.estimation.watch_options import WatchOptions
 
 # --- track ---
 
@@ -34,24 +37,52 @@ def add_track(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--delay", type=float, metavar="S",
                    help="streaming: report each state S seconds after it (default: 0.1; "
                    "docs/track.md)")
+    p.add_argument("--watch", action="store_true",
+                   help="also watch for a station that moved during the capture: 'station N "
+                   "moved at t = ... s', exit 3 (docs/track.md)")
+    p.add_argument("--watch-window", type=at_least(0, strict=True), metavar="S",
+                   default=WatchOptions.window_s,
+                   help="watch: the windows' length (s), one every sixth of it")
+    p.add_argument("--watch-k-sigma", type=at_least(0, strict=True),
+                   default=WatchOptions.k_sigma,
+                   help="watch: a window is out over this many sigmas of its history")
+    p.add_argument("--watch-csv", metavar="FILE",
+                   help="watch: write every station's window tests to this CSV")
     add_common_output(p)
     mark_inputs(p, "stations", "angles", "board", "calibration", "imu")
     return p
 
 
 def run_track(args: argparse.Namespace) -> int:
+    from lhgraph.io.files import check_writable
     from lhgraph.workflow.track import track_files
 
+    if (args.watch_csv or args.watch_window != WatchOptions.window_s
+            or args.watch_k_sigma != WatchOptions.k_sigma) and not args.watch:
+        raise InputError("the watch's options need --watch", "--watch-csv" if args.watch_csv
+                         else "--watch-window/--watch-k-sigma")
+    if args.watch_csv:
+        check_writable(args.watch_csv, args.force)
+    watch = (WatchOptions(window_s=args.watch_window, step_s=args.watch_window / 6,
+                          k_sigma=args.watch_k_sigma) if args.watch else None)
     progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
     out = track_files(args.board, args.angles, args.stations, args.output, args.calibration,
                       args.streaming, args.force, progress=progress, delay_s=args.delay,
-                      imu=args.imu)
+                      imu=args.imu, watch_options=watch)
     if not args.quiet:
         print(out.summary())
-    if out.verdict is None:
-        return 0
-    print_verdict(args, out.verdict)
-    return verdict_exit([out.verdict])
+    if out.watch is not None:
+        if args.watch_csv:
+            from lhgraph.report.station_watch import save_watch_tests
+
+            save_watch_tests(out.watch, args.watch_csv, args.force)
+        if args.quiet:
+            for move in out.watch.moves:
+                print(f"MOVED: {move.message()}")
+    if out.verdict is not None:
+        print_verdict(args, out.verdict)
+    moved = 3 if out.watch is not None and out.watch.moves else 0
+    return max(moved, verdict_exit([out.verdict]) if out.verdict is not None else 0)
 
 
 COMMANDS.append(("track", add_track, run_track))

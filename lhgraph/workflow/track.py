@@ -8,12 +8,15 @@ contract trajectory CSV with the added columns ``lighthouse``, ``hits``, ``sigma
 atomically. A track ends with a verdict on its residuals
 (:func:`lhgraph.report.assessment.track_verdict`): the angles fit the stations, or not (batch:
 the graph's residuals; streaming: those of the path as reported,
-:func:`lhgraph.estimation.graph.path_residuals.path_residuals`).
+:func:`lhgraph.estimation.graph.path_residuals.path_residuals`). With ``watch`` the capture is
+also watched for a station that moved during it (:mod:`lhgraph.estimation.station_watch`):
+batch, every window with the whole path; streaming, each window as soon as the path reported
+so far covers it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,10 +25,11 @@ import numpy as np
 from lhgraph.errors import InputError
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.path_residuals import path_residuals
-from lhgraph.estimation.graph.streaming import DELAY_S, track_stream
+from lhgraph.estimation.graph.streaming import DELAY_S, StreamingEstimate, track_stream
 from lhgraph.estimation.graph.track import TrackedPath, track
 from lhgraph.estimation.result import Residuals
 from lhgraph.estimation.spread import robust_sigma
+from lhgraph.estimation.station_watch import Watcher, WatchOptions, WatchResult
 from lhgraph.io.angles import load_angles
 from lhgraph.io.files import check_writable
 from lhgraph.io.imu import load_imu
@@ -51,6 +55,7 @@ class TrackOutput:
     residuals: Residuals | None = None
     range_m: float = float("nan")
     verdict: Verdict | None = None
+    watch: WatchResult | None = None
 
     def summary(self) -> str:
         """States, time span, how well determined, what was written; batch: the residuals
@@ -68,6 +73,8 @@ class TrackOutput:
                          f"(inliers), robust spread {spread * 1e6:.1f} µrad = "
                          f"{spread * self.range_m * 1e3:.2f} mm at the median range "
                          f"{self.range_m:.2f} m, inlier fraction {r.inlier_fraction():.3f}")
+        if self.watch is not None:
+            lines.append(self.watch.summary())
         return "\n".join(lines)
 
 
@@ -75,7 +82,8 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
                 calibration: str | Path | None = None, streaming: bool = False,
                 overwrite: bool = False, options: GraphOptions | None = None,
                 progress: Progress | None = None, delay_s: float | None = None,
-                imu: str | Path | None = None) -> TrackOutput:
+                imu: str | Path | None = None, watch_options: WatchOptions | None = None
+                ) -> TrackOutput:
     """Track the board of ``board`` (a board TOML or a built-in name) through ``angles`` with
     the stations of ``stations`` held fixed and write the trajectory CSV ``output``.
 
@@ -84,7 +92,9 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
     than the angles' sweeps is refused (InputError). ``streaming``: per sync cycle, each
     state as estimated ``delay_s`` after it (default
     :data:`~lhgraph.estimation.graph.streaming.DELAY_S`); ``imu``: the receiver's
-    ``imu.csv`` (board frame, the angles' clock) for the graph's IMU factors (batch only)."""
+    ``imu.csv`` (board frame, the angles' clock) for the graph's IMU factors (batch only);
+    ``watch_options``: also watch for a station that moved during the capture (each move
+    said through ``progress`` when found)."""
     check_writable(output, overwrite, create_parents=False)  # the folder: when writing
     if imu is not None and streaming:
         raise InputError("IMU factors are batch only: drop --streaming or --imu", "--imu")
@@ -113,9 +123,12 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
     if calibration is not None:
         check_generations(models, the_angles, calibration, angles)
     stream = None if imu is None else load_imu(imu)
+    track_models = models or {k: fixed.stations[k].model for k in fixed.indices()}
+    watcher = None if watch_options is None else Watcher(
+        the_board, the_angles, fixed, track_models, watch_options, options)
     if streaming:
-        estimates = list(track_stream(the_board, the_angles, fixed, models, options,
-                                      delay_s=delay_s))
+        estimates = stream_and_watch(track_stream(the_board, the_angles, fixed, models,
+                                                  options, delay_s=delay_s), watcher, progress)
         if not estimates:
             raise InputError("too short to track in streaming mode (no estimate after the "
                              "warm-up)", angles)
@@ -125,6 +138,11 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
         result = track(the_board, the_angles, fixed, models, options, progress=progress,
                        imu=stream)
         path, cycle_s, status = result.path, [], result.status
+    watched = None
+    if watcher is not None:
+        watcher.catch_up(path.trajectory.time, path.trajectory.T_world_board,
+                         progress=progress)
+        watched = watcher.result()
     written = save_trajectory(path.trajectory, output, overwrite, path.columns())
     range_m = median_range(path, fixed)
     calibrated = (fixed.extra.get("verdict") or {}).get("residual_spread_urad")
@@ -134,12 +152,32 @@ def track_files(board: str | Path, angles: str | Path, stations: str | Path, out
         residuals = path_residuals(the_board, the_angles, fixed, path, models, options)
         return TrackOutput(path, written, streaming, cycle_s, status, residuals, range_m,
                            track_verdict("converged", 0, residuals, range_m,
-                                         calibration_spread_urad=calibrated))
+                                         calibration_spread_urad=calibrated), watched)
     gravity = None if result.gravity is None else float(np.linalg.norm(result.gravity))
     bias = None if result.imu_bias is None else float(np.linalg.norm(result.imu_bias[3:]))
     return TrackOutput(path, written, streaming, cycle_s, status, result.residuals, range_m,
                        track_verdict(status, result.iterations, result.residuals, range_m,
-                                     gravity, calibrated, bias))
+                                     gravity, calibrated, bias), watched)
+
+
+def stream_and_watch(estimates: Iterable[StreamingEstimate], watcher: Watcher | None,
+                     progress: Progress | None) -> list[StreamingEstimate]:
+    """Every streaming estimate; with a ``watcher``, each watch window solved as soon as
+    the path reported so far reaches its end (a move is said when found, as it would be
+    live)."""
+    out: list[StreamingEstimate] = []
+    times: list[np.ndarray] = []
+    poses: list[np.ndarray] = []
+    for estimate in estimates:
+        out.append(estimate)
+        if watcher is None or not estimate.path:
+            continue
+        times.append(estimate.path.trajectory.time)
+        poses.append(estimate.path.trajectory.T_world_board)
+        covered = float(times[-1][-1])
+        if watcher.due(covered):
+            watcher.catch_up(np.concatenate(times), np.concatenate(poses), covered, progress)
+    return out
 
 
 def median_range(path: TrackedPath, stations: Stations) -> float:
