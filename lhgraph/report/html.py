@@ -3,7 +3,8 @@
 Figures (matplotlib, no display needed): the 3-D scene (station axes, board path, position
 covariance ellipsoids scaled up), residual histograms per station/axis, residual vs measured
 angle, residual rms per sensor, where the board was seen in each station's view, and the
-optimiser's convergence; a plain verdict (:mod:`lhgraph.report.assessment`) and the
+optimiser's convergence, the co-visibility graph of three stations or more
+(:mod:`lhgraph.report.visibility`); a plain verdict (:mod:`lhgraph.report.assessment`) and the
 stations' poses with their 1-sigma in the printed axes (:mod:`lhgraph.report.uncertainty`).
 Frames: world = reference station (+x forward, +y left, +z up); residuals in µrad.
 """
@@ -20,15 +21,22 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from lhgraph.estimation.result import Residuals, SolveResult
+from lhgraph.estimation.visibility import co_visibility
 from lhgraph.io.angles import Angles
 from lhgraph.io.stations import Stations
 from lhgraph.report.assessment import FOV_HALF_DEG, coverage, verdict, view_points
 from lhgraph.report.figures import png_bytes
+from lhgraph.report.visibility import visibility_figure, visibility_rows
 
 ELLIPSOID_SCALE = 100.0
 AXIS_LENGTH_M = 0.3
 AXIS_COLOURS = ("tab:red", "tab:green", "tab:blue")
 AXIS_NAMES = ("azimuth", "elevation")
+COVERAGE_COLUMNS = 4
+"""Stations per row of the coverage figure (a 16-station room: 4 rows)."""
+VISIBILITY_NOTE = ("<p class='note'>Stations that saw the board within 50 ms of each other "
+                   "are linked (line width: sweeps seen together); a station's pose is tied "
+                   "to the reference's through the chain of links shown as its hops.</p>")
 STYLE = """body{font-family:sans-serif;max-width:1100px;margin:1em auto;color:#222}
 table{border-collapse:collapse;margin:0.5em 0;font-size:0.85em}
 td,th{border:1px solid #bbb;padding:2px 6px;text-align:right;white-space:nowrap}
@@ -240,10 +248,12 @@ def coverage_figure(angles: Angles) -> Figure:
     """Where each station saw the board: 2-D histogram of the sensors' (azimuth, elevation)
     in 5-deg cells, the +-60 deg view outlined; azimuth + = the station's left."""
     stations = angles.stations()
-    fig = Figure(figsize=(4 * len(stations), 4))
+    cols = min(len(stations), COVERAGE_COLUMNS)
+    rows = -(-len(stations) // cols)
+    fig = Figure(figsize=(4 * cols, 4 * rows))
     edges = np.arange(-FOV_HALF_DEG - 10, FOV_HALF_DEG + 10.1, 5.0)
     for i, k in enumerate(stations):
-        ax = fig.add_subplot(1, len(stations), i + 1)
+        ax = fig.add_subplot(rows, cols, i + 1)
         pts = view_points(angles, k)
         counts, _, _ = np.histogram2d(pts[:, 0], pts[:, 1], bins=(edges, edges))
         shown = np.ma.masked_equal(counts.T, 0)
@@ -349,6 +359,8 @@ def method_report(method: str, result: SolveResult, summary: dict[str, Any], ang
                  png_tag(angle_figure(result.residuals, angles), "residual vs angle"),
                  png_tag(sensor_figure(result.residuals), "residual per sensor")]
     body += ["<h2>Coverage</h2>", png_tag(coverage_figure(angles), "coverage")]
+    if len(result.stations.stations) >= 3:
+        body += _visibility_html(result, angles)
     conv = convergence_figure({method: result.error_history})
     if conv is not None:
         body += ["<h2>Convergence</h2>", png_tag(conv, "convergence")]
@@ -360,6 +372,17 @@ def method_report(method: str, result: SolveResult, summary: dict[str, Any], ang
     if s["decode"]:
         body += ["<h2>Decoder</h2>", f"<pre>{html.escape(chr(10).join(s['decode']))}</pre>"]
     return _page(f"lhgraph run: {method}", body)
+
+
+def _visibility_html(result: SolveResult, angles: Angles) -> list[str]:
+    """The co-visibility section (:mod:`lhgraph.report.visibility`)."""
+    vis = co_visibility(angles)
+    ref = result.stations.reference
+    positions = {k: result.stations.pose(k)[:3, 3] for k in result.stations.indices()}
+    return ["<h2>Co-visibility</h2>", VISIBILITY_NOTE,
+            png_tag(visibility_figure(vis, positions, ref), "co-visibility graph"),
+            _table(["station", "hits", "captures", "seen together with",
+                    f"links from station {ref}"], visibility_rows(vis, ref))]
 
 
 def comparison_report(results: dict[str, SolveResult], comparison: list[dict[str, Any]],
