@@ -66,7 +66,7 @@ def write_room(seed: int, segment_s: float, folder: Path) -> tuple[Path, list[Pa
                       for k, s in sim.truth.stations.items()}, folder / "ootx.toml")
     config = folder / "run.toml"
     config.write_text('board = "board.toml"\ntruth = "truth.toml"\n'
-                      'calibration = "ootx.toml"\nmethods = ["graph"]\n'
+                      'calibration = "ootx.toml"\nmethod = "graph"\n'
                       f"angles = {json.dumps(names)}\n")
     return config, [folder / n for n in names]
 
@@ -85,7 +85,7 @@ def one_seed(seed: int, segment_s: float, work: Path, figure: Path | None) -> li
     seconds = time.perf_counter() - tic
     if done.returncode not in (0, 3):
         raise SystemExit(f"solve seed {seed}: {done.stderr.strip()}")
-    result = load_stations(folder / "run" / "graph" / "stations.toml")
+    result = load_stations(folder / "run" / "stations.toml")
     truth = load_stations(folder / "truth.toml")
     angles, _, _ = join_captures(captures, [f.name for f in files])
     vis = co_visibility(angles)
@@ -93,15 +93,14 @@ def one_seed(seed: int, segment_s: float, work: Path, figure: Path | None) -> li
     if figure is not None:
         positions = {k: result.pose(k)[:3, 3] for k in result.indices()}
         figure.write_bytes(png_bytes(visibility_figure(vis, positions, result.reference), 110))
-    report = (folder / "run" / "graph" / "report.html").read_text()
+    report = (folder / "run" / "report.html").read_text()
     rows = []
     errors = {e.station: e for e in station_errors(truth, result)}
-    for k in result.indices():
-        e = errors[k]
+    for k, e in sorted(errors.items()):  # every station but the reference
         seen_in = [str(c) for c, s in enumerate(kept) if k in s]
         rows.append(f"| {seed} | {k} | {', '.join(seen_in)} | {hops.get(k, '-')} | "
                     f"{e.position_norm_m * 1e3:.3f} | {np.degrees(e.rotation_rad):.4f} | "
-                    f"{nees(truth, result, k) if k != result.reference else float('nan'):.1f} |")
+                    f"{nees(truth, result, k):.1f} |")
     worst = max(e.position_norm_m for e in errors.values()) * 1e3
     worst_deg = max(np.degrees(e.rotation_rad) for e in errors.values())
     summary = (f"| {seed} | {len(kept)} | {' / '.join(','.join(map(str, s)) for s in kept)} | "

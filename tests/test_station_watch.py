@@ -153,3 +153,5 @@ def test_cli_track_watch_exit_3_and_csv(moved_files, capsys):
     # the watch's options without the watch
     assert main(args[:-4] + ["--watch-csv", str(moved_files / "w2.csv"), "--force"]) == 2
     assert "need --watch" in capsys.readouterr().err
+    assert main(args[:-3] + ["--watch-window", "100", "--force"]) == 2
+    assert "--watch-window: must be in (0, 60]" in capsys.readouterr().err

@@ -63,8 +63,14 @@ def run_track(args: argparse.Namespace) -> int:
                          else "--watch-window/--watch-k-sigma")
     if args.watch_csv:
         check_writable(args.watch_csv, args.force)
-    watch = (WatchOptions(window_s=args.watch_window, step_s=args.watch_window / 6,
-                          k_sigma=args.watch_k_sigma) if args.watch else None)
+    watch = None
+    if args.watch:
+        try:
+            watch = WatchOptions(window_s=args.watch_window, step_s=args.watch_window / 6,
+                                 k_sigma=args.watch_k_sigma)
+        except InputError as e:  # name the flag, not the option
+            flag = {"window_s": "--watch-window", "k_sigma": "--watch-k-sigma"}
+            raise InputError(e.problem, flag.get(e.where or "", e.where)) from None
     progress = None if args.quiet else (lambda msg: print(f"  {msg}", file=sys.stderr))
     out = track_files(args.board, args.angles, args.stations, args.output, args.calibration,
                       args.streaming, args.force, progress=progress, delay_s=args.delay,

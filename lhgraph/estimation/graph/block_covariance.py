@@ -86,16 +86,17 @@ def block_sandwich(A: sp.csr_matrix, b: Array, row_block: NDArray[np.int64],
     E[columns, np.arange(len(columns))] = 1.0
     Y = normal_solver(A, order)(E)
     white = Y[columns]
-    influence = (A @ Y) * b[:, None]
-    used = row_block >= 0
+    used = np.flatnonzero(row_block >= 0)
     blocks, which = np.unique(row_block[used], return_inverse=True)
-    scores = np.zeros((len(blocks), len(columns)))
-    np.add.at(scores, which, influence[used])
-    scores -= scores.mean(axis=0)
     n = len(blocks)
+    # each block's score, the sum over its rows of b_r (A Y)_r, as (its rows' b^T A) Y: one
+    # sparse gradient row per block times Y, not a dense row of A Y per row of A
+    gradients = sp.csr_matrix((b[used], (which, used)), shape=(n, A.shape[0])) @ A
+    scores = np.asarray(gradients @ Y)
+    scores -= scores.mean(axis=0)
     sandwich = scores.T @ scores * (n / max(n - 1, 1))
     if expected is not None and np.any(expected):
-        AY = (A @ Y)[expected]
+        AY = A[np.flatnonzero(expected)] @ Y
         C = np.eye(len(AY)) if expected_cov is None else expected_cov
         sandwich = sandwich + AY.T @ C @ AY
     return 0.5 * (white + white.T), sandwich, n
