@@ -153,8 +153,7 @@ def window_starts(t_first: float, t_last: float, options: WatchOptions) -> Array
 
 
 def window_difference(board: Board, angles: Angles, start: CalibrationStart, t0_s: float,
-                      t1_s: float,
-                      models: dict[int, StationModel], options: GraphOptions
+                      t1_s: float, models: dict[int, StationModel], options: GraphOptions
                       ) -> WindowDifference | str:
     """The window ``[t0_s, t1_s)``'s :class:`WindowDifference`, or why it has none (the
     reference unseen, one station only, the solve failing or not converging)."""
@@ -268,6 +267,7 @@ class StationWatch:
         half = 0.5 * (first.t1_s - first.t0_s)
         return StationMove(k, first.t0_s + half, half, last.t1_s, last.position_m,
                            last.rotation_rad, min(t.z for t in runs), reference)
+
 
 @dataclass(frozen=True)
 class WatchResult:
