@@ -79,6 +79,10 @@ def add_solve(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="also solve for the board's sensor positions (graph method) and write "
                    "the board with them (docs/solve.md)")
     p.add_argument("--calibration", help="factory calibration (ootx.toml) of the stations")
+    p.add_argument("--factory-terms", metavar="TERMS",
+                   help="graph method: also solve these factory terms of every station, "
+                   "comma-separated (e.g. tilt,gibmag), prior centred on the calibration's "
+                   "values (graph option factory_terms; docs/self_calibration.md)")
     p.add_argument("--truth", help="true stations TOML: print the errors")
     p.add_argument("--reference", type=int,
                    help="station index of the world frame (default: the lowest index seen)")
@@ -132,6 +136,12 @@ def run_solve(args: argparse.Namespace) -> int:
         flags["--angles"] = ("angles", args.angles[0])
         config = replace(config, more_angles=tuple(Path(a) for a in args.angles[1:]))
     config = override(config, flags)
+    if args.factory_terms is not None:
+        try:
+            config = replace(config, graph=config.graph.with_values(
+                factory_terms=args.factory_terms))
+        except InputError as err:
+            raise InputError(err.problem, where="--factory-terms") from None
     if args.method is not None:
         config = replace(config, methods=None)
     if config.output is None:

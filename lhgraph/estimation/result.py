@@ -72,6 +72,11 @@ class SolveResult:
     sensor_offset_m: NDArray[np.float64] | None = None
     """With the graph's sensor offsets (``sensor_offset_sigma_m``): the correction ``(n_sensors,
     3)`` (m, board frame) of every sensor position of the board file, by board row."""
+    factory_terms: dict[int, dict[str, dict[str, list[float]]]] | None = None
+    """With the graph's solved factory terms (``factory_terms``): per station index, per
+    term, per axis (lists of two, rad): ``decoded_rad`` (the value the solve was given,
+    OOTX), ``solved_rad``, ``shift_rad`` (solved - decoded), ``sigma_rad`` (honest) and
+    ``sigma_white_rad``. The result's station models carry the solved values."""
     factory_information: dict[str, list] | None = None
     """With the graph's ``factory_information``: how well the capture determines each
     station's factory terms (:meth:`lhgraph.estimation.graph.factory_information.

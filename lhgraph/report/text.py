@@ -37,6 +37,22 @@ def covariance_note(result: SolveResult) -> list[str]:
             f"white-noise sigma (independent residuals), by station: {parts}"]
 
 
+def factory_lines(result: SolveResult) -> list[str]:
+    """One line per station and solved factory term (``factory_terms``): the solved value,
+    its shift from the decoded (OOTX) value and its honest sigma per axis, in mrad; nothing
+    when the solve held the decoded values."""
+    lines = []
+    for sid, terms in sorted((result.factory_terms or {}).items()):
+        parts = []
+        for key, v in terms.items():
+            axes = ", ".join(f"{a * 1e3:+.2f} ({d * 1e3:+.2f} +- {s * 1e3:.2f})" for a, d, s in
+                             zip(v["solved_rad"], v["shift_rad"], v["sigma_rad"], strict=True))
+            parts.append(f"{key} {axes}")
+        lines.append(f"station {sid} factory terms, mrad (shift from OOTX +- sigma) per axis: "
+                     + "; ".join(parts))
+    return lines
+
+
 def format_solution(result: SolveResult, errors: list[PoseError] | None = None) -> str:
     """A plain-text table of the stations, residuals, timings and (optional) errors."""
     lines = [f"method {result.method}: {result.status} after {result.iterations} iterations"]
@@ -62,6 +78,7 @@ def format_solution(result: SolveResult, errors: list[PoseError] | None = None) 
     if any(s.covariance is not None for s in result.stations.stations.values()):
         lines.append(SIGMA_NOTE)
         lines.extend(covariance_note(result))
+    lines.extend(factory_lines(result))
     if result.residuals is not None:
         r = result.residuals
         lines.append(f"residuals: {len(r.residual_rad)} hits, rms {r.rms_urad():.1f} µrad "

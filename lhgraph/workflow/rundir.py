@@ -198,6 +198,8 @@ def summarise(config: SolveConfig, inputs: SolveInputs, result: SolveResult,
         "timings_s": {"load": load_s, **result.timings_s},
         "warnings": result.warnings,
         "captures": result.captures,
+        "factory_terms": ({str(k): v for k, v in result.factory_terms.items()}
+                          if result.factory_terms else None),
         "diagnostics": result.diagnostics,
         "coverage": {str(k): coverage(view_points(inputs.angles, k))
                      for k in inputs.angles.stations()},

@@ -150,6 +150,9 @@ def solve_to_files(config: SolveConfig, overwrite: bool = False,
     if config.board_output is not None and config.method_list()[0] != "graph":
         raise InputError("the sensor positions are solved by the graph method only",
                          config.path, "board_output")
+    if config.graph.factory.terms and config.method_list()[0] != "graph":
+        raise InputError("the factory terms are solved by the graph method only",
+                         config.path, "factory_terms")
     check_inputs(config)
     targets = [Path(t) for t in (config.output, config.trajectory, config.board_output)
                if t is not None]

@@ -7,7 +7,8 @@ to each family in turn, serves the families' callbacks the point they need
 cached ones), and sums the families' costs (the number ``graph.error`` returns, without a
 Python callback per factor). What each family found is read off the family itself:
 :attr:`FactorEvaluator.bearing`, :attr:`~FactorEvaluator.motion`,
-:attr:`~FactorEvaluator.corrections`, :attr:`~FactorEvaluator.imu`.
+:attr:`~FactorEvaluator.corrections`, :attr:`~FactorEvaluator.factory`,
+:attr:`~FactorEvaluator.imu`.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 from lhgraph.estimation.graph.families.base import Array, BoardPoint, FactorFamily, read_only
 from lhgraph.estimation.graph.families.bearing import Bearings
 from lhgraph.estimation.graph.families.corrections import BoardCorrections
+from lhgraph.estimation.graph.families.factory import FactoryCorrections
 from lhgraph.estimation.graph.families.motion import MotionPrior
 from lhgraph.estimation.graph.variables import (
     BOARD_POSE,
@@ -62,6 +64,8 @@ class FactorEvaluator:
         """The motion prior (:class:`MotionPrior`)."""
         self.corrections = self._one(BoardCorrections)
         """The board's diode biases and sensor offsets (:class:`BoardCorrections`)."""
+        self.factory = self._one(FactoryCorrections)
+        """The stations' factory-term corrections (:class:`FactoryCorrections`)."""
         self.imu = next((f for f in families if isinstance(f, TwistImu | CombinedImuFamily)),
                         None)
         """The IMU factors (:class:`TwistImu` or :class:`CombinedImuFamily`; None without)."""

@@ -8,12 +8,15 @@ order their factors go into the graph (:mod:`lhgraph.estimation.graph.families`)
 2. **board corrections** (:class:`~.families.corrections.BoardCorrections`): with
    ``diode_bias_sigma_rad`` the diode biases' priors, with ``sensor_offset_sigma_m`` the
    sensor offsets' prior and scale factor (no factor when neither is asked);
-3. **motion prior** (:class:`~.families.motion.MotionPrior`) between consecutive states;
-4. with an IMU stream: ``imu_factors`` resolving to ``"combined"``, GTSAM's preintegrated
+3. **factory terms** (:class:`~.families.factory.FactoryCorrections`): with
+   ``factory_terms`` a zero-mean prior on every station slot's corrections to its decoded
+   factory terms (no factor without);
+4. **motion prior** (:class:`~.families.motion.MotionPrior`) between consecutive states;
+5. with an IMU stream: ``imu_factors`` resolving to ``"combined"``, GTSAM's preintegrated
    combined IMU factors (:class:`~lhgraph.estimation.imu.families.CombinedImuFamily`), to
    ``"twist"`` the gyro, accelerometer and preintegrated gyro factors on the twists
    (:class:`~lhgraph.estimation.imu.families.TwistImu`);
-5. with an earlier result as a prior (the problem's ``station_priors``) and station
+6. with an earlier result as a prior (the problem's ``station_priors``) and station
    variables: a prior factor per station it holds
    (:class:`~.families.station_prior.StationPriorFactors`).
 
@@ -31,6 +34,7 @@ from lhgraph.estimation.graph.evaluator import FactorEvaluator
 from lhgraph.estimation.graph.families.base import FactorFamily
 from lhgraph.estimation.graph.families.bearing import Bearings
 from lhgraph.estimation.graph.families.corrections import BoardCorrections
+from lhgraph.estimation.graph.families.factory import FactoryCorrections
 from lhgraph.estimation.graph.families.motion import MotionPrior
 from lhgraph.estimation.graph.families.station_prior import StationPriorFactors
 from lhgraph.estimation.graph.loss import RobustLoss
@@ -39,6 +43,7 @@ from lhgraph.estimation.graph.variables import (
     STATION_POSE,
     VariableLayout,
     diode_bias_family,
+    factory_family,
     sensor_offset_family,
 )
 from lhgraph.estimation.imu.families import CombinedImuFamily, TwistImu
@@ -59,7 +64,8 @@ def graph_layout(problem: GraphProblem, options: GraphOptions, tracking: bool,
         diode_bias=diode_bias_family(n) if options.board.diode_bias_sigma_rad > 0 else None,
         sensor_offset=sensor_offset_family(n) if options.board.sensor_offset_sigma_m > 0 else None,
         imu_calibration=options.imu.calibrated,
-        combined_imu=inertial and options.imu.factor_kind == "combined")
+        combined_imu=inertial and options.imu.factor_kind == "combined",
+        factory=factory_family(len(terms)) if (terms := options.factory.terms) else None)
 
 
 def factor_families(problem: GraphProblem, layout: VariableLayout, options: GraphOptions,
@@ -68,10 +74,13 @@ def factor_families(problem: GraphProblem, layout: VariableLayout, options: Grap
     ``inertial`` the IMU's), in graph order."""
     corrections = BoardCorrections(problem, layout, options.board.diode_bias_sigma_rad,
                                    options.board.sensor_offset_sigma_m)
+    factory = FactoryCorrections(problem, layout, options.factory.terms,
+                                 options.factory.factory_sigma_rad, corrections)
     families: list[FactorFamily] = [
         Bearings(problem, layout, RobustLoss(options.robust.loss, options.robust.huber_k),
-                 options.noise.angle_sigma_rad, options.noise.sweep_offset_sigma_rad, corrections),
-        corrections,
+                 options.noise.angle_sigma_rad, options.noise.sweep_offset_sigma_rad, corrections,
+                 factory),
+        corrections, factory,
         MotionPrior(problem, (options.motion.accel_psd_rot, options.motion.accel_psd_pos))]
     if inertial is not None and options.imu.factor_kind == "combined":
         families.append(CombinedImuFamily(inertial.stream, problem.state_time, layout,

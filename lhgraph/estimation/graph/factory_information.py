@@ -27,13 +27,14 @@ point); on real data the same factor as the stations' honest-to-white ratio appl
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
 from lhgraph.estimation.graph.evaluator import FactorEvaluator
+from lhgraph.estimation.graph.families.factory import STEP_RAD, with_term_deltas
 from lhgraph.estimation.graph.linear_system import linear_system, normal_solver
 from lhgraph.estimation.graph.variables import STATION_POSE, SWEEP_OFFSET
 from lhgraph.estimation.residuals import bearing_residuals
@@ -41,8 +42,6 @@ from lhgraph.model.factory import CALIBRATION_KEYS, LH2_CALIBRATION_KEYS
 from lhgraph.model.station import StationModel
 
 Array = NDArray[np.float64]
-STEP_RAD = 1e-6
-"""Half-step of the central difference in each term (rad; the terms are mrad to 0.1 rad)."""
 POSE_COORDINATES = ("rx", "ry", "rz", "tx", "ty", "tz")
 PARTICIPATION = 0.01
 """A term takes part in an undetermined direction of the information when its component in
@@ -122,9 +121,9 @@ def factory_terms(ev: FactorEvaluator) -> list[FactoryTerm]:
 
 
 def _with_term(model: StationModel, term: FactoryTerm, delta: float) -> StationModel:
-    value = np.array(getattr(model.calibration, term.key), dtype=float)
-    value[term.axis] += delta
-    return replace(model, calibration=replace(model.calibration, **{term.key: value}))
+    step = np.zeros(2)
+    step[term.axis] = delta
+    return with_term_deltas(model, (term.key,), step)
 
 
 def term_jacobian(ev: FactorEvaluator, terms: list[FactoryTerm]) -> Array:

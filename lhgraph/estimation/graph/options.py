@@ -1,7 +1,7 @@
 """The graph solver's options, nested by concern: :class:`GraphOptions` holds one frozen
 dataclass per concern (the optimiser and its stopping rule, the diodes' noise, the robust
-loss, the motion prior, the IMU, the board's self-calibration, the data, the stations'
-uncertainty), each of whose fields declares its allowed values
+loss, the motion prior, the IMU, the board's and the stations' self-calibration, the data,
+the stations' uncertainty), each of whose fields declares its allowed values
 (:func:`lhgraph.config.option`).
 
 Every option keeps one name across the groups, so a configuration's ``[graph]`` table may
@@ -23,6 +23,7 @@ from lhgraph.config import check_fields, group, groups, option
 from lhgraph.errors import InputError
 from lhgraph.estimation.imu.inertial import accel_factor_sigma
 from lhgraph.io.imu import ImuStream
+from lhgraph.model.factory import CALIBRATION_KEYS, LH2_CALIBRATION_KEYS
 
 LOSSES = ("cauchy", "huber")
 SOLVERS = ("lm", "isam2")
@@ -230,6 +231,32 @@ class BoardOptions:
 
 
 @dataclass(frozen=True)
+class FactoryOptions:
+    """The stations' self-calibration (:mod:`lhgraph.estimation.graph.families.factory`):
+    ``factory_terms``: the factory terms solved as graph variables, comma-separated names of
+    :data:`~lhgraph.model.factory.CALIBRATION_KEYS` and the LH2 ogee terms (``"tilt,gibmag"``;
+    each per axis and station; ``""``, the default: none, the decoded values held, for why
+    see docs/self_calibration.md); ``factory_sigma_rad``: the spread of their prior, centred
+    on each station's decoded (OOTX) value."""
+
+    factory_terms: str = option("")
+    factory_sigma_rad: float = option(0.003, gt=0)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        known = CALIBRATION_KEYS + LH2_CALIBRATION_KEYS
+        bad = [t for t in self.terms if t not in known]
+        if bad or len(set(self.terms)) != len(self.terms):
+            raise InputError(f"{self.factory_terms!r}: expected distinct names among "
+                             f"{', '.join(known)}, separated by commas", where="factory_terms")
+
+    @property
+    def terms(self) -> tuple[str, ...]:
+        """The names of ``factory_terms`` (empty: none solved)."""
+        return tuple(t.strip() for t in self.factory_terms.split(",") if t.strip())
+
+
+@dataclass(frozen=True)
 class DataOptions:
     """How the capture is read into the graph.
 
@@ -284,6 +311,7 @@ class GraphOptions:
     motion: MotionOptions = group(MotionOptions)
     imu: ImuOptions = group(ImuOptions)
     board: BoardOptions = group(BoardOptions)
+    factory: FactoryOptions = group(FactoryOptions)
     data: DataOptions = group(DataOptions)
     uncertainty: UncertaintyOptions = group(UncertaintyOptions)
 

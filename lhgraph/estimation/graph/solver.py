@@ -182,12 +182,13 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
     options = resolution.options
     reference = problem.station_ids[0]
     poses = ev.station_poses()
+    models = ev.factory.models()
     out: dict[int, Station] = {reference: Station(np.eye(4), np.zeros((6, 6)),
-                                                  problem.models[0], np.zeros((6, 6)))}
+                                                  models[0], np.zeros((6, 6)))}
     warnings = list(notes or [])
     for slot in range(1, len(problem.station_ids)):
         sid = problem.station_ids[slot]
-        out[sid] = Station(poses[slot].copy(), cov.honest[slot], problem.models[slot],
+        out[sid] = Station(poses[slot].copy(), cov.honest[slot], models[slot],
                            cov.white[slot])
         sigma_m = float(np.sqrt(np.max(np.linalg.eigvalsh(cov.white[slot][3:, 3:]))))
         if sigma_m > options.data.weak_link_sigma_m:
@@ -220,6 +221,29 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
         sensor_offset_m=(ev.corrections.sensor_offsets().copy()
                          if options.board.sensor_offset_sigma_m > 0 else None),
         options=options.nested(),
+        factory_terms=factory_estimates(problem, ev, cov),
         factory_information=None if cov.factory is None else cov.factory.as_dict(),
         option_rules=list(resolution.applied),
     )
+
+
+def factory_estimates(problem: GraphProblem, ev: FactorEvaluator, cov: StationCovariances
+                      ) -> dict[int, dict[str, dict[str, list[float]]]] | None:
+    """The solved factory terms by station index (:attr:`SolveResult.factory_terms`; None
+    when the graph solves none)."""
+    keys = ev.factory.keys_solved
+    if not keys or cov.terms_white is None:
+        return None
+    out: dict[int, dict[str, dict[str, list[float]]]] = {}
+    D = ev.factory.corrections()
+    for slot, sid in enumerate(problem.station_ids):
+        white = np.sqrt(np.diag(cov.terms_white[slot])).reshape(-1, 2)
+        honest = np.sqrt(np.diag((cov.terms_honest or cov.terms_white)[slot])).reshape(-1, 2)
+        cal = problem.models[slot].calibration
+        out[int(sid)] = {key: {
+            "decoded_rad": getattr(cal, key).tolist(),
+            "solved_rad": (getattr(cal, key) + D[slot].reshape(-1, 2)[i]).tolist(),
+            "shift_rad": D[slot].reshape(-1, 2)[i].tolist(),
+            "sigma_rad": honest[i].tolist(), "sigma_white_rad": white[i].tolist()}
+            for i, key in enumerate(keys)}
+    return out

@@ -20,6 +20,9 @@ IMU calibration ``c``   10   gyro scale error, IMU time offset (s), IMU frame ro
 IMU velocity    ``v``   3    the board origin's velocity (m/s) in the world at sweep k
 IMU bias (k)    ``b``   6    accelerometer (m/s^2) and gyro (rad/s) bias at sweep k
                              (``gtsam.imuBias.ConstantBias``)
+diode bias      ``d``   2n   angle bias (rad) of each diode and axis, per station slot
+sensor offset   ``p``   3n   correction (m, board frame) of every sensor position
+factory terms   ``f``   2m   correction (rad) of m factory terms per axis, per station slot
 ==============  ======  ===  ============================================================
 
 Gravity exists only when the graph has IMU factors. With the twist factors
@@ -106,9 +109,10 @@ IMU_BIAS_STATE = VariableFamily("IMU bias at state", "b", 6, False, "chain", 1.0
 
 DIODE_BIAS = "diode bias"
 SENSOR_OFFSET = "sensor offset"
-"""Names of the two families whose size depends on the board (built per problem by
-:func:`diode_bias_family` and :func:`sensor_offset_family`; :meth:`VariableLayout.family`
-finds them)."""
+FACTORY_TERMS = "factory terms"
+"""Names of the families whose size depends on the problem or the options (built by
+:func:`diode_bias_family`, :func:`sensor_offset_family` and :func:`factory_family`;
+:meth:`VariableLayout.family` finds them)."""
 
 
 def diode_bias_family(n_sensors: int) -> VariableFamily:
@@ -123,6 +127,14 @@ def sensor_offset_family(n_sensors: int) -> VariableFamily:
     frame, row-major by board row), shared by every station."""
     return VariableFamily(SENSOR_OFFSET, "p", 3 * n_sensors, False, "root", 1.0,
                           "correction (m, board frame) of every sensor's position")
+
+
+def factory_family(n_terms: int) -> VariableFamily:
+    """The corrections of ``n_terms`` factory terms (each per axis) to a station's decoded
+    values: one vector per station slot, ``2 * n_terms`` long (key-major: ``[key0 axis0,
+    key0 axis1, key1 axis0, ...]``), in rad."""
+    return VariableFamily(FACTORY_TERMS, "f", 2 * n_terms, False, "root", 1.0,
+                          "correction (rad) of station slot s's factory terms to OOTX")
 
 
 FAMILIES = (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE, IMU_BIAS, GRAVITY,
@@ -157,14 +169,15 @@ class VariableLayout:
     def of_problem(cls, n_states: int, n_stations: int, fixed_stations: bool = False,
                    inertial: bool = False, diode_bias: VariableFamily | None = None,
                    sensor_offset: VariableFamily | None = None,
-                   imu_calibration: bool = False, combined_imu: bool = False
-                   ) -> VariableLayout:
+                   imu_calibration: bool = False, combined_imu: bool = False,
+                   factory: VariableFamily | None = None) -> VariableLayout:
         """The batch graph's layout: every family per board state ``0..n_states-1``, a station
         pose for slots ``1..n_stations-1`` (none with ``fixed_stations``: tracking, every
         station held at a known pose), with ``inertial`` one IMU bias and the gravity, and
         with ``inertial`` and ``imu_calibration`` the IMU's calibration; with
         ``combined_imu`` (GTSAM's combined IMU factors) instead a velocity and an IMU bias
-        per state and the gravity."""
+        per state and the gravity; ``diode_bias`` and ``factory`` one vector per station
+        slot, ``sensor_offset`` one."""
         states = range(n_states)
         stations = range(0) if fixed_stations else range(1, n_stations)
         imu = range(1) if inertial and not combined_imu else range(0)
@@ -180,6 +193,8 @@ class VariableLayout:
             families[diode_bias] = range(n_stations)
         if sensor_offset is not None:
             families[sensor_offset] = range(1)
+        if factory is not None:
+            families[factory] = range(n_stations)
         return cls(families)
 
     @property
@@ -314,6 +329,7 @@ def initial_values(layout: VariableLayout, init: Initialisation,
                                                       init.V[:, 3:]))
         layout.insert(values, IMU_BIAS_STATE, np.zeros((len(init.X), 6)))
     for family in filter(None, (layout.family(DIODE_BIAS), layout.family(SENSOR_OFFSET),
+                                layout.family(FACTORY_TERMS),
                                 layout.family(IMU_CALIBRATION.name))):
         layout.insert(values, family, np.zeros((len(layout.indices(family)), family.dim)))
     return values

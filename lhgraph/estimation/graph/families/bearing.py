@@ -1,10 +1,11 @@
 """The bearing factors (one per sweep) and their sweep-offset priors: :class:`Bearings`.
 
 Sweep k's factor, keys :func:`bearing_keys` (board pose, twist and sweep offset of state k,
-the station's pose unless it is held fixed, and the board's corrections when the graph has
-them, :mod:`.corrections`): one row per diode hit in that sweep, residual = predicted angle
-of the full station model (:func:`lhgraph.estimation.residuals.bearing_residuals`) + sweep
-offset - measured, isotropic diode noise wrapped in the per-diode robust loss
+the station's pose unless it is held fixed, the board's corrections when the graph has
+them, :mod:`.corrections`, and the station's factory-term corrections, :mod:`.factory`):
+one row per diode hit in that sweep, residual = predicted angle of the full station model
+(its factory terms corrected; :func:`lhgraph.estimation.residuals.bearing_residuals`) +
+sweep offset - measured, isotropic diode noise wrapped in the per-diode robust loss
 (:mod:`lhgraph.estimation.graph.loss`). Every sweep offset has a zero-mean prior (GTSAM's
 ``PriorFactorVector``).
 """
@@ -23,6 +24,7 @@ from lhgraph.estimation.graph.families.base import (
     read_only,
 )
 from lhgraph.estimation.graph.families.corrections import BoardCorrections
+from lhgraph.estimation.graph.families.factory import FactoryCorrections
 from lhgraph.estimation.graph.loss import RobustLoss
 from lhgraph.estimation.graph.variables import (
     BOARD_POSE,
@@ -36,18 +38,16 @@ from lhgraph.estimation.problem import GraphProblem
 from lhgraph.estimation.residuals import bearing_residuals
 
 
-def bearing_keys(k: int, station_var: int | None, bias_key: int | None = None,
-                 offset_key: int | None = None) -> list[int]:
+def bearing_keys(k: int, station_var: int | None, corrections: list[int] | None = None
+                 ) -> list[int]:
     """Keys of sweep k's bearing factor; ``station_var``: the slot of the sweeping station
-    when its pose is a variable, None when it is held fixed (the reference); ``bias_key``:
-    the sweeping station's diode-bias vector, ``offset_key``: the sensor offsets, when the
-    graph has them."""
+    when its pose is a variable, None when it is held fixed (the reference);
+    ``corrections``: the keys of the corrections the graph has, in order (the sweeping
+    station's diode-bias vector, the sensor offsets, the station's factory terms)."""
     keys = [BOARD_POSE.key(k), BOARD_TWIST.key(k), SWEEP_OFFSET.key(k)]
     if station_var is not None:
         keys.append(STATION_POSE.key(station_var))
-    if bias_key is not None:
-        keys.append(bias_key)
-    return keys if offset_key is None else keys + [offset_key]
+    return keys + list(corrections or [])
 
 
 def bearing_factor(keys: list[int], n_hits: int, angle_sigma_rad: float,
@@ -79,9 +79,9 @@ class Bearings(FactorFamily):
 
     def __init__(self, problem: GraphProblem, layout: VariableLayout, loss: RobustLoss,
                  angle_sigma_rad: float, sweep_offset_sigma_rad: float,
-                 corrections: BoardCorrections):
+                 corrections: BoardCorrections, factory: FactoryCorrections):
         self.problem, self.layout, self.loss = problem, layout, loss
-        self.corrections = corrections
+        self.corrections, self.factory = corrections, factory
         self._sigma0 = angle_sigma_rad
         self._offset_sigma = sweep_offset_sigma_rad
         self._scale = 1.0  # sigma_0 / sigma: the diodes' noise is sigma, not sigma_0
@@ -94,11 +94,11 @@ class Bearings(FactorFamily):
     @property
     def variables(self) -> tuple[VariableFamily, ...]:
         return ((BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE)
-                + self.corrections.variables)
+                + self.corrections.variables + self.factory.variables)
 
     @property
     def depends_on(self) -> tuple[FactorFamily, ...]:
-        return (self.corrections,)
+        return (self.corrections, self.factory)
 
     def _station_var(self, slot: int) -> int | None:
         return slot if self.layout.holds(STATION_POSE, slot) else None
@@ -110,7 +110,8 @@ class Bearings(FactorFamily):
         if i >= K:
             return [SWEEP_OFFSET.key(i - K)]
         slot = int(self.problem.state_station[i])
-        return bearing_keys(i, self._station_var(slot), *self.corrections.bearing_keys(slot))
+        return bearing_keys(i, self._station_var(slot), self.corrections.bearing_keys(slot)
+                            + self.factory.bearing_keys(slot))
 
     def add_to(self, graph: gtsam.NonlinearFactorGraph, ensure: Ensure) -> None:
         first, p = graph.size(), self.problem
@@ -128,7 +129,7 @@ class Bearings(FactorFamily):
         self._O = self.layout.read_vectors(values, SWEEP_OFFSET)[:, 0]
         h = self.corrections.hits
         self._point = point
-        self._r = bearing_residuals(h, point.X, point.W, point.L, self.problem.models,
+        self._r = bearing_residuals(h, point.X, point.W, point.L, self.factory.models(),
                                     False)[0]
         self._r += self._O[h.state]
         self._r += self.corrections.angle_biases()
@@ -145,7 +146,7 @@ class Bearings(FactorFamily):
         if self._raw is None:
             pt = self._point
             _, HX, HW, HL = bearing_residuals(self.corrections.hits, pt.X, pt.W, pt.L,
-                                              self.problem.models)
+                                              self.factory.models())
             self._raw = HX, HW, HL
         self._HX, self._HW, self._HL = (H * self._scale for H in self._raw)
         self._offset_jacobian = self._ones * self._scale
@@ -203,7 +204,8 @@ class Bearings(FactorFamily):
                 if station_var is not None:
                     H[3] = self._HL[a:b]
                     j = 4
-                for H_j in self.corrections.hit_jacobians(a, b, self._HX, self._scale):
+                for H_j in (self.corrections.hit_jacobians(a, b, self._HX, self._scale)
+                            + self.factory.hit_jacobian(a, b, self._scale)):
                     H[j] = H_j
                     j += 1
             return self._r_whitened[a:b]
