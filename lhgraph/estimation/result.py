@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from lhgraph.io.stations import Stations
 from lhgraph.io.trajectory import Trajectory
+from lhgraph.model.board import Board, with_sensor_offsets
 
 
 @dataclass(frozen=True)
@@ -77,7 +78,22 @@ class SolveResult:
     term, per axis (lists of two, rad): ``decoded_rad`` (the value the solve was given,
     OOTX), ``solved_rad``, ``shift_rad`` (solved - decoded), ``sigma_rad`` (honest) and
     ``sigma_white_rad``. The result's station models carry the solved values."""
+    board_scale: dict[str, float] | None = None
+    """With the graph's board scale (``board_scale_sigma``): ``correction`` k (the sensors
+    solved at ``1 + k`` times the board file's positions), its honest ``sigma`` and
+    ``sigma_white``."""
     factory_information: dict[str, list] | None = None
     """With the graph's ``factory_information``: how well the capture determines each
     station's factory terms (:meth:`lhgraph.estimation.graph.factory_information.
     FactoryInformation.as_dict`)."""
+
+    def corrected_board(self, board: Board) -> Board:
+        """``board`` with the sensor positions the graph solved (its sensor offsets, then its
+        board scale; ``board`` itself when it solved neither)."""
+        if self.sensor_offset_m is None and self.board_scale is None:
+            return board
+        offsets = (np.zeros_like(board.positions) if self.sensor_offset_m is None
+                   else np.asarray(self.sensor_offset_m))
+        k = 0.0 if self.board_scale is None else self.board_scale["correction"]
+        return with_sensor_offsets(board, (1.0 + k) * (board.positions + offsets)
+                                   - board.positions)

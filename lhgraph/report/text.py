@@ -37,11 +37,17 @@ def covariance_note(result: SolveResult) -> list[str]:
             f"white-noise sigma (independent residuals), by station: {parts}"]
 
 
-def factory_lines(result: SolveResult) -> list[str]:
-    """One line per station and solved factory term (``factory_terms``): the solved value,
-    its shift from the decoded (OOTX) value and its honest sigma per axis, in mrad; nothing
-    when the solve held the decoded values."""
+def calibration_lines(result: SolveResult) -> list[str]:
+    """With a solved board scale (``board_scale_sigma``) its line, and one line per station
+    with solved factory terms (``factory_terms``): each term's solved value, its shift from
+    the decoded (OOTX) value and its honest sigma per axis, in mrad; nothing when the solve
+    held both."""
     lines = []
+    if result.board_scale is not None:
+        b = result.board_scale
+        lines.append(f"board scale solved: {b['correction'] * 100:+.3f} % +- "
+                     f"{b['sigma'] * 100:.3f} % (the sensors at {1 + b['correction']:.5f} "
+                     "times the board file's positions)")
     for sid, terms in sorted((result.factory_terms or {}).items()):
         parts = []
         for key, v in terms.items():
@@ -78,7 +84,7 @@ def format_solution(result: SolveResult, errors: list[PoseError] | None = None) 
     if any(s.covariance is not None for s in result.stations.stations.values()):
         lines.append(SIGMA_NOTE)
         lines.extend(covariance_note(result))
-    lines.extend(factory_lines(result))
+    lines.extend(calibration_lines(result))
     if result.residuals is not None:
         r = result.residuals
         lines.append(f"residuals: {len(r.residual_rad)} hits, rms {r.rms_urad():.1f} µrad "

@@ -32,7 +32,7 @@ from lhgraph.geometry.transforms import euler_zyx, matrix_to_quat
 from lhgraph.io.files import check_writable, read_json_object, write_atomic, write_csv_columns
 from lhgraph.io.stations import Stations, load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
-from lhgraph.model.board import save_board, with_sensor_offsets
+from lhgraph.model.board import save_board
 from lhgraph.report.assessment import (
     Verdict,
     coverage,
@@ -200,6 +200,7 @@ def summarise(config: SolveConfig, inputs: SolveInputs, result: SolveResult,
         "captures": result.captures,
         "factory_terms": ({str(k): v for k, v in result.factory_terms.items()}
                           if result.factory_terms else None),
+        "board_scale": result.board_scale,
         "diagnostics": result.diagnostics,
         "coverage": {str(k): coverage(view_points(inputs.angles, k))
                      for k in inputs.angles.stations()},
@@ -306,7 +307,9 @@ def run_to_directory(config: SolveConfig, output: str | Path, overwrite: bool = 
                          config.path, "board_output")
     methods = config.method_list()
     check_inputs(config)
-    for target in planned_files(output, methods, config.graph.board.sensor_offset_sigma_m > 0):
+    board = config.graph.board
+    for target in planned_files(output, methods, board.sensor_offset_sigma_m > 0
+                                or board.board_scale_sigma > 0):
         if target.exists() and not target.is_dir() and not (overwrite or resume):
             raise InputError("exists already (--resume keeps the methods that finished and "
                              "computes the rest; --force recomputes everything)", target)
@@ -364,9 +367,9 @@ def _run_method(config: SolveConfig, inputs: SolveInputs, method: str, folder: P
                                folder / "stations.toml", overwrite))
     if result.trajectory is not None:
         files.append(save_trajectory(result.trajectory, folder / "trajectory.csv", overwrite))
-    if result.sensor_offset_m is not None:
-        files.append(save_board(with_sensor_offsets(inputs.board, result.sensor_offset_m),
-                                folder / "board.toml", overwrite))
+    if result.sensor_offset_m is not None or result.board_scale is not None:
+        files.append(save_board(result.corrected_board(inputs.board), folder / "board.toml",
+                                overwrite))
     if result.residuals is not None:
         files.append(save_residuals(result.residuals, folder / "residuals.csv", overwrite))
     say(f"[{method}] writing the report")

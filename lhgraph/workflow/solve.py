@@ -30,7 +30,7 @@ from lhgraph.io.files import check_writable
 from lhgraph.io.imu import ImuStream
 from lhgraph.io.stations import Stations, load_stations, save_stations
 from lhgraph.io.trajectory import save_trajectory
-from lhgraph.model.board import Board, save_board, with_sensor_offsets
+from lhgraph.model.board import Board, save_board
 from lhgraph.model.station import StationModel
 from lhgraph.report.assessment import Verdict, result_verdict
 from lhgraph.workflow.inputs import SolveInputs, check_inputs, load_inputs
@@ -167,7 +167,7 @@ def solve_to_files(config: SolveConfig, overwrite: bool = False,
     verdict = result_verdict(result, inputs.angles)
     written = write_solution(result, config.output, config.trajectory, overwrite, verdict)
     if config.board_output is not None:
-        board = with_sensor_offsets(inputs.board, result.sensor_offset_m)
+        board = result.corrected_board(inputs.board)
         written.append(save_board(board, config.board_output, overwrite))
     errors = station_errors(truth, result.stations) if truth else None
     return result, errors, written, verdict

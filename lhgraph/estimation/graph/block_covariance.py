@@ -45,7 +45,7 @@ from lhgraph.estimation.graph.families.station_prior import StationPriorFactors
 from lhgraph.estimation.graph.linear_system import linear_system, normal_solver
 from lhgraph.estimation.graph.optimizer import OptimizerResult
 from lhgraph.estimation.graph.options import UncertaintyOptions
-from lhgraph.estimation.graph.variables import FACTORY_TERMS, STATION_POSE
+from lhgraph.estimation.graph.variables import BOARD_SCALE, FACTORY_TERMS, STATION_POSE
 
 Array = NDArray[np.float64]
 
@@ -57,8 +57,9 @@ class StationCovariances:
     ``white`` with ``covariance = "white"``); ``method`` the one ``honest`` is,
     ``block_s`` the block length (s) and ``n_blocks`` their number (0 without blocks);
     ``factory``: the factory terms' information when asked (``factory_information``);
-    ``terms_white`` / ``terms_honest``: with solved factory terms (``factory_terms``), each
-    station slot's covariance of its corrections (rad^2, key-major), the same two ways."""
+    ``calibration_white`` / ``calibration_honest``: by GTSAM key, the covariance of each
+    solved calibration variable the result reports (a station slot's factory-term
+    corrections, rad^2, key-major; the board scale), the same two ways."""
 
     white: dict[int, Array]
     honest: dict[int, Array]
@@ -66,8 +67,8 @@ class StationCovariances:
     block_s: float
     n_blocks: int
     factory: FactoryInformation | None = None
-    terms_white: dict[int, Array] | None = None
-    terms_honest: dict[int, Array] | None = None
+    calibration_white: dict[int, Array] | None = None
+    calibration_honest: dict[int, Array] | None = None
 
     def summary(self) -> dict[str, float]:
         """The blocks as diagnostics figures."""
@@ -140,16 +141,13 @@ def station_covariances_only(fit: OptimizerResult, ev: FactorEvaluator,
     factory terms, their covariances too, the stations' and theirs from one sandwich)."""
     slots = list(ev.layout.indices(STATION_POSE))
     white = {slot: fit.covariance(STATION_POSE.key(slot)) for slot in slots}
-    terms = ev.layout.family(FACTORY_TERMS)
-    term_keys = [] if terms is None else ev.layout.keys(terms)
-    terms_white = None if terms is None else {
-        slot: fit.covariance(key) for slot, key in zip(ev.layout.indices(terms), term_keys,
-                                                       strict=True)}
+    extra = calibration_keys(ev)
+    extra_white = {key: fit.covariance(key) for key in extra} or None
     t = ev.problem.state_time
     block_s = block_length_s(float(t[-1] - t[0]), options) if len(t) else 0.0
     if options.covariance == "white" or not slots:
-        return StationCovariances(white, dict(white), "white", 0.0, 0, None, terms_white,
-                                  terms_white)
+        return StationCovariances(white, dict(white), "white", 0.0, 0, None, extra_white,
+                                  extra_white)
     system = linear_system(fit.graph, fit.values, ev.layout)
     columns = system.columns([STATION_POSE.key(slot) for slot in slots])
     last = max(int(np.ceil((t[-1] - t[0]) / block_s)) - 1, 0)
@@ -165,20 +163,28 @@ def station_covariances_only(fit: OptimizerResult, ev: FactorEvaluator,
     expected_cov = None if priors is None else sp.block_diag(priors.whitened_errors()).toarray()
     if expected_cov is not None and expected_cov.shape[0] != int(prior_rows.sum()):
         raise RuntimeError("the station priors' rows do not match their factors")
-    wanted = np.concatenate([columns] + ([system.columns(term_keys)] if term_keys else []))
+    wanted = np.concatenate([columns] + ([system.columns(extra)] if extra else []))
     _, sandwich, n = block_sandwich(system.A, system.b, block.astype(np.int64), wanted,
                                     system.elimination_columns(ev.layout), prior_rows,
                                     expected_cov)
     if n < 2:
-        return StationCovariances(white, dict(white), "white", block_s, n, None, terms_white,
-                                  terms_white)
+        return StationCovariances(white, dict(white), "white", block_s, n, None, extra_white,
+                                  extra_white)
     honest = {slot: floor_at(white[slot], sandwich[6 * i:6 * i + 6, 6 * i:6 * i + 6])
               for i, slot in enumerate(slots)}
-    terms_honest = None
-    if terms is not None:
-        d, first = terms.dim, len(columns)
-        terms_honest = {slot: floor_at(terms_white[slot], sandwich[
-            first + d * i:first + d * (i + 1), first + d * i:first + d * (i + 1)])
-            for i, slot in enumerate(ev.layout.indices(terms))}
-    return StationCovariances(white, honest, "blocks", block_s, n, None, terms_white,
-                              terms_honest)
+    extra_honest, first = {}, len(columns)
+    for key in extra:
+        d = system.dim[key]
+        extra_honest[key] = floor_at(extra_white[key],
+                                     sandwich[first:first + d, first:first + d])
+        first += d
+    return StationCovariances(white, honest, "blocks", block_s, n, None, extra_white,
+                              extra_honest or None)
+
+
+def calibration_keys(ev: FactorEvaluator) -> list[int]:
+    """The keys of the calibration variables a result reports with their covariance: every
+    station slot's factory-term corrections, then the board scale (those the graph has)."""
+    factory = ev.layout.family(FACTORY_TERMS)
+    keys = [] if factory is None else list(ev.layout.keys(factory))
+    return keys + ([BOARD_SCALE.key(0)] if ev.layout.holds(BOARD_SCALE, 0) else [])

@@ -7,7 +7,8 @@ order their factors go into the graph (:mod:`lhgraph.estimation.graph.families`)
    zero-mean prior on every sweep offset;
 2. **board corrections** (:class:`~.families.corrections.BoardCorrections`): with
    ``diode_bias_sigma_rad`` the diode biases' priors, with ``sensor_offset_sigma_m`` the
-   sensor offsets' prior and scale factor (no factor when neither is asked);
+   sensor offsets' prior and scale factor, with ``board_scale_sigma`` the board scale's
+   prior (no factor when none is asked);
 3. **factory terms** (:class:`~.families.factory.FactoryCorrections`): with
    ``factory_terms`` a zero-mean prior on every station slot's corrections to its decoded
    factory terms (no factor without);
@@ -65,7 +66,8 @@ def graph_layout(problem: GraphProblem, options: GraphOptions, tracking: bool,
         sensor_offset=sensor_offset_family(n) if options.board.sensor_offset_sigma_m > 0 else None,
         imu_calibration=options.imu.calibrated,
         combined_imu=inertial and options.imu.factor_kind == "combined",
-        factory=factory_family(len(terms)) if (terms := options.factory.terms) else None)
+        factory=factory_family(len(terms)) if (terms := options.factory.terms) else None,
+        board_scale=options.board.board_scale_sigma > 0)
 
 
 def factor_families(problem: GraphProblem, layout: VariableLayout, options: GraphOptions,
@@ -73,7 +75,8 @@ def factor_families(problem: GraphProblem, layout: VariableLayout, options: Grap
     """The registry: the factor families of ``problem``'s graph under ``options`` (with
     ``inertial`` the IMU's), in graph order."""
     corrections = BoardCorrections(problem, layout, options.board.diode_bias_sigma_rad,
-                                   options.board.sensor_offset_sigma_m)
+                                   options.board.sensor_offset_sigma_m,
+                                   options.board.board_scale_sigma)
     factory = FactoryCorrections(problem, layout, options.factory.terms,
                                  options.factory.factory_sigma_rad, corrections)
     families: list[FactorFamily] = [

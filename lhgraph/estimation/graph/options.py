@@ -221,10 +221,15 @@ class BoardOptions:
     """The board's self-calibration (:mod:`lhgraph.estimation.graph.families.corrections`):
     ``diode_bias_sigma_rad``: when positive, every station sees every diode on each axis
     with a constant angle bias of this prior spread; ``sensor_offset_sigma_m``: when
-    positive, a correction of every sensor's position is solved with this prior spread."""
+    positive, a correction of every sensor's position is solved with this prior spread;
+    ``board_scale_sigma``: when positive, the board's scale (a relative correction of every
+    sensor position) is solved with this prior spread: determined by an IMU's metric
+    accelerations only (without one the stations' covariance carries the prior's scale
+    uncertainty)."""
 
     diode_bias_sigma_rad: float = option(0.0, ge=0)
     sensor_offset_sigma_m: float = option(0.0, ge=0)
+    board_scale_sigma: float = option(0.0, ge=0, lt=0.5)
 
     def __post_init__(self) -> None:
         check_fields(self)

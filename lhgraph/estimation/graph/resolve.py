@@ -19,7 +19,11 @@ kept in its result and ``summary.json``):
    calibration solved, ``"stream"`` otherwise;
 6. ``imu_factors = "auto"`` (with IMU factors): ``"twist"`` when the IMU calibration is
    solved or the gyro preintegrated, ``"combined"`` otherwise;
-7. ``reference`` unset: the lowest station index seen.
+7. ``reference`` unset: the lowest station index seen;
+8. ``board_scale_sigma`` > 0 in a calibration without IMU factors (the light-only stage
+   before the IMU refinement): 0. Angles cannot see the board's scale, and a free scale
+   shrinks under the motion prior (smaller accelerations cost less: on a simulated deck
+   capture it ran to -73 %); the IMU stage solves it.
 """
 
 from __future__ import annotations
@@ -167,5 +171,8 @@ def resolve_options(options: GraphOptions, facts: DataFacts, inertial: bool = Fa
         set_to("imu_factors", options.imu.factor_kind, "auto")
     if flat["reference"] is None:
         set_to("reference", facts.first_station, "unset: the lowest station index seen")
+    if flat["board_scale_sigma"] > 0 and not inertial and not tracking:
+        set_to("board_scale_sigma", 0.0, "light-only stage: the IMU refinement solves the "
+               "board's scale")
     return Resolution(options.with_values(**new) if new else options, tuple(applied))
 

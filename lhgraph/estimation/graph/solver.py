@@ -18,13 +18,14 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from lhgraph.errors import SolverError
+from lhgraph.errors import InputError, SolverError
 from lhgraph.estimation.graph.batch import build_and_optimise
 from lhgraph.estimation.graph.block_covariance import StationCovariances, station_covariances
 from lhgraph.estimation.graph.evaluator import FactorEvaluator
 from lhgraph.estimation.graph.optimizer import OptimizerResult
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.resolve import Resolution, prepare, resolve_options
+from lhgraph.estimation.graph.variables import BOARD_SCALE
 from lhgraph.estimation.imu.refinement import refine_with_imu
 from lhgraph.estimation.init import Initialiser
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
@@ -84,6 +85,9 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         if progress and rests.hits_dropped:
             progress(rests.summary())
     angles, facts = prepare(angles, options, models, progress)
+    if imu is None and options.board.board_scale_sigma > 0:
+        raise InputError("the board's scale needs an IMU stream (--imu): angles alone "
+                         "cannot tell a larger board in a larger room", where="board_scale_sigma")
     if imu is not None and facts.few_diode and options.imu.calibration_from_light:
         raise SolverError("the IMU's calibration for the combined IMU factors comes from the "
                           "light's rotations, which a few-diode receiver's sweeps determine "
@@ -125,11 +129,19 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
         extra |= refined.diagnostics
     timings["optimise"] = time.perf_counter() - t1
     ev.evaluate(fit.values)
+    k, k_sigma = ev.corrections.scale(), options.board.board_scale_sigma
+    if ev.corrections.scaled and abs(k) > SCALE_WARN * k_sigma:
+        notes.append(f"the board's scale moved by {k * 100:+.2f} % ({abs(k) / k_sigma:.1f} "
+                     "times its prior spread): the IMU and the light disagree on the metric "
+                     "size; the stations' distances follow the IMU")
     result = _result(angles, problem, ev, fit, cov, resolution, timings, t0, init.parents,
                      extra, notes)
     return with_prior_only(result, prior, models) if prior is not None else result
 
 
+SCALE_WARN = 3.0
+"""A solved board scale further than this many prior spreads from the board file's is a
+warning (the real Crazyflie logs: -5 to -10 % against the mocap's +0.04 to +0.9 %)."""
 PRIOR_CHI2_WARN = 22.46
 """A station's prior chi2 (6 dof, in the prior's honest covariance) above this (the 99.9 %
 point) is a warning: the capture puts it where the earlier result says it is not."""
@@ -222,6 +234,7 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
                          if options.board.sensor_offset_sigma_m > 0 else None),
         options=options.nested(),
         factory_terms=factory_estimates(problem, ev, cov),
+        board_scale=board_scale(ev, cov),
         factory_information=None if cov.factory is None else cov.factory.as_dict(),
         option_rules=list(resolution.applied),
     )
@@ -232,18 +245,32 @@ def factory_estimates(problem: GraphProblem, ev: FactorEvaluator, cov: StationCo
     """The solved factory terms by station index (:attr:`SolveResult.factory_terms`; None
     when the graph solves none)."""
     keys = ev.factory.keys_solved
-    if not keys or cov.terms_white is None:
+    if not keys or cov.calibration_white is None:
         return None
     out: dict[int, dict[str, dict[str, list[float]]]] = {}
     D = ev.factory.corrections()
     for slot, sid in enumerate(problem.station_ids):
-        white = np.sqrt(np.diag(cov.terms_white[slot])).reshape(-1, 2)
-        honest = np.sqrt(np.diag((cov.terms_honest or cov.terms_white)[slot])).reshape(-1, 2)
+        key = ev.factory.family.key(slot)
+        white = np.sqrt(np.diag(cov.calibration_white[key])).reshape(-1, 2)
+        honest = np.sqrt(np.diag((cov.calibration_honest or cov.calibration_white)[key])
+                         ).reshape(-1, 2)
         cal = problem.models[slot].calibration
-        out[int(sid)] = {key: {
-            "decoded_rad": getattr(cal, key).tolist(),
-            "solved_rad": (getattr(cal, key) + D[slot].reshape(-1, 2)[i]).tolist(),
+        out[int(sid)] = {term: {
+            "decoded_rad": getattr(cal, term).tolist(),
+            "solved_rad": (getattr(cal, term) + D[slot].reshape(-1, 2)[i]).tolist(),
             "shift_rad": D[slot].reshape(-1, 2)[i].tolist(),
             "sigma_rad": honest[i].tolist(), "sigma_white_rad": white[i].tolist()}
-            for i, key in enumerate(keys)}
+            for i, term in enumerate(keys)}
     return out
+
+
+def board_scale(ev: FactorEvaluator, cov: StationCovariances) -> dict[str, float] | None:
+    """The solved board scale (:attr:`SolveResult.board_scale`; None when the graph has
+    none)."""
+    if not ev.corrections.scaled or cov.calibration_white is None:
+        return None
+    key = BOARD_SCALE.key(0)
+    honest = (cov.calibration_honest or cov.calibration_white)[key]
+    return {"correction": ev.corrections.scale(),
+            "sigma": float(np.sqrt(honest[0, 0])),
+            "sigma_white": float(np.sqrt(cov.calibration_white[key][0, 0]))}

@@ -141,7 +141,7 @@ def _isam2_params() -> gtsam.ISAM2Params:
 STREAMING_UNSUPPORTED = ("diode_bias_sigma_rad", "sensor_offset_sigma_m", "gyro_preintegration",
                          "gyro_scale_sigma", "imu_time_offset_sigma_s",
                          "imu_rotation_sigma_rad", "imu_position_sigma_m", "rest_keep_every",
-                         "factory_terms")
+                         "factory_terms", "board_scale_sigma")
 """Options the streaming smoother cannot honour: refused when set, never ignored."""
 
 

@@ -23,6 +23,7 @@ IMU bias (k)    ``b``   6    accelerometer (m/s^2) and gyro (rad/s) bias at swee
 diode bias      ``d``   2n   angle bias (rad) of each diode and axis, per station slot
 sensor offset   ``p``   3n   correction (m, board frame) of every sensor position
 factory terms   ``f``   2m   correction (rad) of m factory terms per axis, per station slot
+board scale     ``s``   1    relative scale correction of every sensor position
 ==============  ======  ===  ============================================================
 
 Gravity exists only when the graph has IMU factors. With the twist factors
@@ -102,6 +103,9 @@ IMU_CALIBRATION = VariableFamily(
 
 IMU_VELOCITY = VariableFamily("IMU velocity", "v", 3, False, "chain", 1.0,
                               "velocity (m/s) of the board origin in the world at sweep k")
+BOARD_SCALE = VariableFamily("board scale", "s", 1, False, "root", 1.0,
+                             "relative scale correction k of the board's sensor positions "
+                             "(each at (1 + k) times its position, board frame)")
 IMU_BIAS_STATE = VariableFamily("IMU bias at state", "b", 6, False, "chain", 1.0,
                                 "accelerometer (m/s^2) and gyro (rad/s) bias at sweep k",
                                 is_bias=True)
@@ -138,7 +142,7 @@ def factory_family(n_terms: int) -> VariableFamily:
 
 
 FAMILIES = (BOARD_POSE, BOARD_TWIST, SWEEP_OFFSET, STATION_POSE, IMU_BIAS, GRAVITY,
-            IMU_CALIBRATION, IMU_VELOCITY, IMU_BIAS_STATE)
+            IMU_CALIBRATION, IMU_VELOCITY, IMU_BIAS_STATE, BOARD_SCALE)
 """Every family the graph and the streaming smoother know."""
 
 
@@ -170,14 +174,15 @@ class VariableLayout:
                    inertial: bool = False, diode_bias: VariableFamily | None = None,
                    sensor_offset: VariableFamily | None = None,
                    imu_calibration: bool = False, combined_imu: bool = False,
-                   factory: VariableFamily | None = None) -> VariableLayout:
+                   factory: VariableFamily | None = None, board_scale: bool = False
+                   ) -> VariableLayout:
         """The batch graph's layout: every family per board state ``0..n_states-1``, a station
         pose for slots ``1..n_stations-1`` (none with ``fixed_stations``: tracking, every
         station held at a known pose), with ``inertial`` one IMU bias and the gravity, and
         with ``inertial`` and ``imu_calibration`` the IMU's calibration; with
         ``combined_imu`` (GTSAM's combined IMU factors) instead a velocity and an IMU bias
         per state and the gravity; ``diode_bias`` and ``factory`` one vector per station
-        slot, ``sensor_offset`` one."""
+        slot, ``sensor_offset`` one, with ``board_scale`` the board's scale correction."""
         states = range(n_states)
         stations = range(0) if fixed_stations else range(1, n_stations)
         imu = range(1) if inertial and not combined_imu else range(0)
@@ -195,6 +200,8 @@ class VariableLayout:
             families[sensor_offset] = range(1)
         if factory is not None:
             families[factory] = range(n_stations)
+        if board_scale:
+            families[BOARD_SCALE] = range(1)
         return cls(families)
 
     @property
@@ -329,7 +336,7 @@ def initial_values(layout: VariableLayout, init: Initialisation,
                                                       init.V[:, 3:]))
         layout.insert(values, IMU_BIAS_STATE, np.zeros((len(init.X), 6)))
     for family in filter(None, (layout.family(DIODE_BIAS), layout.family(SENSOR_OFFSET),
-                                layout.family(FACTORY_TERMS),
+                                layout.family(FACTORY_TERMS), layout.family(BOARD_SCALE.name),
                                 layout.family(IMU_CALIBRATION.name))):
         layout.insert(values, family, np.zeros((len(layout.indices(family)), family.dim)))
     return values

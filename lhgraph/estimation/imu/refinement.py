@@ -7,9 +7,11 @@ gravity estimated with the stations, on the same build-and-optimise path
 (:func:`~lhgraph.estimation.graph.batch.build_and_optimise`). With ``imu_factors = "auto"``,
 combined factors that raise the light's median angle residual more than
 ``IMU_DISAGREEMENT`` times are replaced by the twist factors, whose noise follows the misfit
-(a warning says so). Started from the initialiser instead of the light's solution, the IMU
-factors hold states in their mirror poses: on the real Crazyflie log that solve did not
-converge in 60 iterations.
+(a warning says so); with the board's scale solved (``board_scale_sigma``) they are judged
+at their end, not after their first steps (the light's solution they start from has the
+board file's scale, which they first correct). Started from the initialiser instead of the
+light's solution, the IMU factors hold states in their mirror poses: on the real Crazyflie
+log that solve did not converge in 60 iterations.
 """
 
 from __future__ import annotations
@@ -125,7 +127,9 @@ def refine_with_imu(problem: GraphProblem, resolution: Resolution, auto: bool,
     if progress:
         progress(f"refining with the IMU: {IMU_FACTOR_NAMES[kind]}")
     limit = IMU_DISAGREEMENT * light_median
-    watch = Disagreement.watch(limit) if kind == "combined" and auto else None
+    fallback = kind == "combined" and auto
+    early = fallback and options.board.board_scale_sigma == 0
+    watch = Disagreement.watch(limit) if early else None
     try:
         fit, ev, cov = build_and_optimise(problem, options, refined, marginals,
                                           progress, inertial=inertial, gravity=gravity,
@@ -133,7 +137,7 @@ def refine_with_imu(problem: GraphProblem, resolution: Resolution, auto: bool,
         imu_median, spent = median_residual(ev, fit.values), fit.iterations
     except Disagreement as stop:
         imu_median, spent = stop.median_rad, stop.steps
-    if watch is not None and imu_median > limit:
+    if fallback and imu_median > limit:
         notes.append(f"GTSAM's combined IMU factors disagree with the light (they raised "
                      f"the median angle residual from {light_median * 1e6:.0f} to "
                      f"{imu_median * 1e6:.0f} urad in {spent} LM steps): refined with the "
