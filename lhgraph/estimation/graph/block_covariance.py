@@ -59,7 +59,8 @@ class StationCovariances:
     ``factory``: the factory terms' information when asked (``factory_information``);
     ``calibration_white`` / ``calibration_honest``: by GTSAM key, the covariance of each
     solved calibration variable the result reports (a station slot's factory-term
-    corrections, rad^2, key-major; the board scale), the same two ways."""
+    corrections, rad^2, key-major; the board scale), the same two ways (both None when the
+    graph solves none)."""
 
     white: dict[int, Array]
     honest: dict[int, Array]
@@ -179,7 +180,7 @@ def station_covariances_only(fit: OptimizerResult, ev: FactorEvaluator,
                                      sandwich[first:first + d, first:first + d])
         first += d
     return StationCovariances(white, honest, "blocks", block_s, n, None, extra_white,
-                              extra_honest or None)
+                              extra_honest if extra else None)
 
 
 def calibration_keys(ev: FactorEvaluator) -> list[int]:

@@ -252,13 +252,13 @@ def factory_estimates(problem: GraphProblem, ev: FactorEvaluator, cov: StationCo
     for slot, sid in enumerate(problem.station_ids):
         key = ev.factory.family.key(slot)
         white = np.sqrt(np.diag(cov.calibration_white[key])).reshape(-1, 2)
-        honest = np.sqrt(np.diag((cov.calibration_honest or cov.calibration_white)[key])
-                         ).reshape(-1, 2)
+        honest = np.sqrt(np.diag(cov.calibration_honest[key])).reshape(-1, 2)
+        shift = D[slot].reshape(-1, 2)
         cal = problem.models[slot].calibration
         out[int(sid)] = {term: {
             "decoded_rad": getattr(cal, term).tolist(),
-            "solved_rad": (getattr(cal, term) + D[slot].reshape(-1, 2)[i]).tolist(),
-            "shift_rad": D[slot].reshape(-1, 2)[i].tolist(),
+            "solved_rad": (getattr(cal, term) + shift[i]).tolist(),
+            "shift_rad": shift[i].tolist(),
             "sigma_rad": honest[i].tolist(), "sigma_white_rad": white[i].tolist()}
             for i, term in enumerate(keys)}
     return out
@@ -270,7 +270,6 @@ def board_scale(ev: FactorEvaluator, cov: StationCovariances) -> dict[str, float
     if not ev.corrections.scaled or cov.calibration_white is None:
         return None
     key = BOARD_SCALE.key(0)
-    honest = (cov.calibration_honest or cov.calibration_white)[key]
     return {"correction": ev.corrections.scale(),
-            "sigma": float(np.sqrt(honest[0, 0])),
+            "sigma": float(np.sqrt(cov.calibration_honest[key][0, 0])),
             "sigma_white": float(np.sqrt(cov.calibration_white[key][0, 0]))}

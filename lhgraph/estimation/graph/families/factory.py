@@ -97,8 +97,12 @@ class FactoryCorrections(FactorFamily):
                         for m, d in zip(self.problem.models, self._D, strict=True)]
 
     def matches(self, values: gtsam.Values, k: int) -> bool:
-        return self.family is None or np.array_equal(
-            self.layout.read_vectors(values, self.family), self._D)
+        """Whether ``values`` hold state ``k``'s station's corrections as last read (the
+        only ones its factors see: one key, not the family)."""
+        if self.family is None:
+            return True
+        slot = int(self.problem.state_station[k])
+        return np.array_equal(values.atVector(self.family.key(slot)), self._D[slot])
 
     def cost(self, values: gtsam.Values) -> float:
         return 0.5 * float(np.sum((self._D / self._sigma) ** 2))
