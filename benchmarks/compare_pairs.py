@@ -47,11 +47,13 @@ def lhgraph(*args: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True)
 
 
-def imported(kind: str, source: Path, work: Path) -> Path:
-    """Import ``source`` (``kind`` crazyflie or hive) into the folder ``work``; ``work``."""
+def imported(kind: str, source: Path, work: Path, *options: str) -> Path:
+    """Import ``source`` (``kind`` crazyflie or hive; further import ``options``) into the
+    folder ``work``; ``work``."""
     extra = ["--system-config", str(source.parent / "system-config.yaml")] \
         if kind == "crazyflie" else []
-    done = lhgraph("import", kind, str(source), *extra, "--output", str(work), "--quiet")
+    done = lhgraph("import", kind, str(source), *extra, *options, "--output", str(work),
+                   "--quiet")
     if done.returncode:
         raise SystemExit(f"import {source}: {done.stderr.strip()}")
     return work
@@ -64,9 +66,10 @@ def solve_imported(work: Path, options: GraphOptions) -> SolveResult:
                                   calibration=work / "ootx.toml", graph=options))
 
 
-def solved(kind: str, source: Path, work: Path) -> Path:
-    """Import ``source`` into ``work`` and solve it; the stations TOML."""
-    imported(kind, source, work)
+def solved(kind: str, source: Path, work: Path, *options: str) -> Path:
+    """Import ``source`` into ``work`` (import ``options``) and solve it; the stations
+    TOML."""
+    imported(kind, source, work, *options)
     out = work / "stations.toml"
     done = lhgraph("solve", "--board", str(work / "board.toml"), "--angles",
                    str(work / "angles.csv"), "--calibration", str(work / "ootx.toml"),
