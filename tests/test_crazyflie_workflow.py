@@ -25,7 +25,9 @@ REFUSALS = ("is moving at t =", "agree poorly", "the tracked pose there is wrong
 KNOWN_OFF = {"lh1_flight_log00": (
     "z up from the deck resting on the floor, yet stations 82 / 170 mm below cfclient's: our "
     "LH1 solves put the stations 4290 mm apart against cfclient's 4184 (2.5 %), and "
-    "cfclient's z (from its floor-plane samples) is ~0.9 deg from gravity (docs/export.md)")}
+    "cfclient's z (from its floor-plane samples) is ~0.9 deg from gravity (docs/export.md); "
+    "cfclient's own stations through the same export sit 112 / 92 mm above ours "
+    "(docs/results/export_heights.md)")}
 
 
 def _run(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, str, str]:
