@@ -10,6 +10,7 @@ them.
 
 from __future__ import annotations
 
+import argparse
 import ast
 import shlex
 import sys
@@ -40,3 +41,15 @@ def command(path: str, argv: list[str] | None) -> str:
     """The whole command line that reruns the benchmark in file ``path`` with ``argv``
     (``None``: this process's ``sys.argv[1:]``), as its results file quotes it."""
     return shlex.join([*prog(path).split(), *(sys.argv[1:] if argv is None else argv)])
+
+
+def results_parser(path: str, doc: str) -> argparse.ArgumentParser:
+    """The parser of the benchmark in file ``path`` (its ``__file__``) with docstring
+    ``doc``: ``--output`` (default ``docs/results/<name>.md``) and ``--force`` (replace
+    it); add the benchmark's own arguments to it."""
+    parser = argparse.ArgumentParser(prog=prog(path),
+                                     description=" ".join(doc.split("\n\n")[0].split()))
+    parser.add_argument("--output", type=Path,
+                        default=HERE.parent / "docs" / "results" / f"{Path(path).stem}.md")
+    parser.add_argument("--force", action="store_true", help="replace an existing output")
+    return parser

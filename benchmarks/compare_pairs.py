@@ -17,6 +17,7 @@ import json
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
 from datetime import date
 from pathlib import Path
 
@@ -57,6 +58,14 @@ def imported(kind: str, source: Path, work: Path, *options: str) -> Path:
     if done.returncode:
         raise SystemExit(f"import {source}: {done.stderr.strip()}")
     return work
+
+
+def imported_logs(logs: tuple[str, ...], work: Path) -> Iterator[tuple[str, Path | None]]:
+    """Each Bitcraze log of ``logs`` (paths under the dataset) imported into a folder of
+    ``work`` as it is reached: ``(log, folder)``, the folder None when the log is absent."""
+    for i, log in enumerate(logs):
+        source = DATA / CF / log
+        yield log, imported("crazyflie", source, work / f"log{i}") if source.exists() else None
 
 
 def solve_imported(work: Path, options: GraphOptions) -> SolveResult:

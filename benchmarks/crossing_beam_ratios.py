@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.compare_pairs import CF, DATA, imported, solve_imported
+from benchmarks.compare_pairs import imported_logs, solve_imported
 from benchmarks.crazyflie_evaluation import _mocap_at, aligned_errors, crossing_beam_positions
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.io.angles import load_angles
@@ -103,12 +103,10 @@ def main(argv: list[str] | None = None) -> int:
              "| cfclient after scale mm | ours after scale mm | ours, deck scaled (oracle) mm "
              "| its ratio |", "|---|---|---|---|---|---|---|---|---|---|"]
     with tempfile.TemporaryDirectory(prefix="lhgraph-beams-") as tmp:
-        for i, log in enumerate(LOGS):
-            source = DATA / CF / log
-            if not source.exists():
+        for log, work in imported_logs(LOGS, Path(tmp)):
+            if work is None:
                 lines.append(f"| {log} | skipped: data absent | | | | | | | | |")
                 continue
-            work = imported("crazyflie", source, Path(tmp) / f"log{i}")
             theirs = judged(work, load_stations(work / "stations-cfclient.toml"))
             ours = judged(work, solve_imported(work, GraphOptions()).stations)
             oracle = judged(work, solved_with_scaled_board(work, ours["scale"]))["rigid_mm"]

@@ -22,7 +22,6 @@ only). ~3 min.
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
 from datetime import date
@@ -30,12 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import command, prog
-from benchmarks.compare_pairs import CF, DATA, imported, lhgraph
+from benchmarks import command, results_parser
+from benchmarks.compare_pairs import CF, DATA, imported_logs, lhgraph
 from lhgraph.io.cfclient import read_system_config
 from lhgraph.io.files import check_writable
 
-ROOT = Path(__file__).resolve().parent.parent
 LOGS = ("lh1_crossingBeam_move/log02", "lh1_crossingBeam_flight/log00",
         "lh2_crossingBeam_move/log00", "lh2_crossingBeam_move/log01")
 TOLERANCE_M = 0.05
@@ -99,11 +97,7 @@ def row(log: str, work: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
-    parser.add_argument("--output", type=Path,
-                        default=ROOT / "docs" / "results" / "export_heights.md")
-    parser.add_argument("--force", action="store_true", help="replace an existing output")
-    args = parser.parse_args(argv)
+    args = results_parser(__file__, __doc__).parse_args(argv)
     out = check_writable(args.output, args.force)
     start = time.perf_counter()
     lines = ["# The cfclient export's station heights against cfclient's", "",
@@ -115,12 +109,9 @@ def main(argv: list[str] | None = None) -> int:
              "| ours - cfclient's file (mm) | ours - cfclient's, same export (mm) "
              "| cfclient's z from gravity (deg) |", "|---|---|---|---|---|---|---|"]
     with tempfile.TemporaryDirectory(prefix="lhgraph-heights-") as tmp:
-        for i, log in enumerate(LOGS):
-            source = DATA / CF / log
-            if not source.exists():
-                lines.append(f"| {log} | skipped: data absent | | | | | |")
-                continue
-            lines.append(row(log, imported("crazyflie", source, Path(tmp) / f"log{i}")))
+        for log, work in imported_logs(LOGS, Path(tmp)):
+            lines.append(row(log, work) if work else f"| {log} | skipped: data absent "
+                         "| | | | | |")
     lines += ["", f"Run time: {(time.perf_counter() - start) / 60:.1f} min."]
     out.write_text("\n".join(lines) + "\n")
     print(f"wrote {out}")

@@ -25,7 +25,6 @@ import benchmarks._single_thread  # noqa: F401  (first: before numpy loads)
 
 # isort: split
 
-import argparse
 import tempfile
 import time
 from datetime import date
@@ -33,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import command, prog
+from benchmarks import command, results_parser
 from benchmarks.compare_pairs import DATA, DEG, imported, solve_imported
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.track import track
@@ -47,7 +46,6 @@ from lhgraph.model.board import load_board
 from lhgraph.model.calibration import load_calibration
 from lhgraph.workflow.inputs import models_of
 
-ROOT = Path(__file__).resolve().parent.parent
 BAGS = ("data8.11", "data8.17")
 IMPORTS = {"sync-bit correction (default)": (), "as recorded (--keep-sync-offsets)":
            ("--keep-sync-offsets",)}
@@ -102,11 +100,7 @@ def rows(work: Path, name: str, options: tuple[str, ...]
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog(__file__), description=__doc__.split("\n")[0])
-    parser.add_argument("--output", type=Path,
-                        default=ROOT / "docs" / "results" / "hive_pair.md")
-    parser.add_argument("--force", action="store_true", help="replace an existing output")
-    args = parser.parse_args(argv)
+    args = results_parser(__file__, __doc__).parse_args(argv)
     out = check_writable(args.output, args.force)
     if not all((DATA / "hive-env8" / f"{bag}.bag").exists() for bag in BAGS):
         raise SystemExit("hive bags absent from ../shared/data/hive-env8")
