@@ -14,6 +14,7 @@ import argparse
 import ast
 import shlex
 import sys
+import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -53,3 +54,12 @@ def results_parser(path: str, doc: str) -> argparse.ArgumentParser:
                         default=HERE.parent / "docs" / "results" / f"{Path(path).stem}.md")
     parser.add_argument("--force", action="store_true", help="replace an existing output")
     return parser
+
+
+def write_results(out: Path, lines: list[str], started: float) -> int:
+    """Write a benchmark's markdown ``lines`` to ``out`` with a last line giving the run
+    time since ``started`` (a ``time.perf_counter()`` reading), say so; 0 (the exit code)."""
+    run = f"Run time: {(time.perf_counter() - started) / 60:.1f} min."
+    out.write_text("\n".join([*lines, "", run]) + "\n")
+    print(f"wrote {out}")
+    return 0

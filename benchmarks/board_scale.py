@@ -23,6 +23,7 @@ import time
 from datetime import date
 from pathlib import Path
 
+from benchmarks import write_results
 from benchmarks.compare_pairs import DATA, PAIRS, ROOT, imported
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
@@ -98,10 +99,7 @@ def main(argv: list[str] | None = None) -> int:
                   "", "| log | scale % | warnings |", "|---|---|---|"]
         with tempfile.TemporaryDirectory(prefix="lhgraph-scale-") as tmp:
             lines += real(Path(tmp))
-    lines += ["", f"Run time: {(time.perf_counter() - tic) / 60:.1f} min."]
-    args.output.write_text("\n".join(lines) + "\n")
-    print(f"wrote {args.output}")
-    return 0
+    return write_results(args.output, lines, tic)
 
 
 if __name__ == "__main__":

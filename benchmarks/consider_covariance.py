@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import command, results_parser
+from benchmarks import command, results_parser, write_results
 from benchmarks.compare_pairs import DATA, DEG, PAIRS, imported, solve_imported
 from lhgraph.estimation.graph.families.factory import with_term_deltas
 from lhgraph.estimation.graph.options import FactoryOptions, GraphOptions
@@ -161,10 +161,8 @@ def main(argv: list[str] | None = None) -> int:
              "## The terms that move station 1 most", "",
              f"Position sigma (mm) each adds at {args.sigma_mrad:g} mrad; the last column all "
              "terms together.", "", "| recording | largest three | all |", "|---|---|---|",
-             *top, "", f"Run time: {(time.perf_counter() - start) / 60:.1f} min."]
-    out.write_text("\n".join(lines) + "\n")
-    print(f"wrote {out}")
-    return 0
+             *top]
+    return write_results(out, lines, start)
 
 
 if __name__ == "__main__":

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import command, results_parser
+from benchmarks import command, results_parser, write_results
 from benchmarks.compare_pairs import CF, DATA, imported_logs, lhgraph
 from lhgraph.io.cfclient import read_system_config
 from lhgraph.io.files import check_writable
@@ -112,10 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         for log, work in imported_logs(LOGS, Path(tmp)):
             lines.append(row(log, work) if work else f"| {log} | skipped: data absent "
                          "| | | | | |")
-    lines += ["", f"Run time: {(time.perf_counter() - start) / 60:.1f} min."]
-    out.write_text("\n".join(lines) + "\n")
-    print(f"wrote {out}")
-    return 0
+    return write_results(out, lines, start)
 
 
 if __name__ == "__main__":

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 import benchmarks._single_thread  # noqa: F401  (one BLAS thread per process)
+from benchmarks import write_results
 from benchmarks.compare_pairs import DATA, PAIRS, ROOT, imported, solve_imported
 from benchmarks.joint_captures import nees
 from lhgraph.estimation.graph.options import GraphOptions
@@ -159,10 +160,7 @@ def main(argv: list[str] | None = None) -> int:
                   "|---|---|---|---|---|---|---|---|"]
         with tempfile.TemporaryDirectory(prefix="lhgraph-selfcal-") as tmp:
             lines += real_rows(Path(tmp))
-    lines += ["", f"Run time: {(time.perf_counter() - tic) / 60:.1f} min."]
-    args.output.write_text("\n".join(lines) + "\n")
-    print(f"wrote {args.output}")
-    return 0
+    return write_results(args.output, lines, tic)
 
 
 if __name__ == "__main__":

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import command, results_parser
+from benchmarks import command, results_parser, write_results
 from benchmarks.compare_pairs import DATA, DEG, imported, solve_imported
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.track import track
@@ -127,11 +127,8 @@ def main(argv: list[str] | None = None) -> int:
              "error against the bag's OptiTrack after the world, hand-eye and time-offset "
              "alignment (mm / deg), rms and median.", "",
              "| import | bag | own stations, rms | median | other bag's stations, rms "
-             "| median |", "|---|---|---|---|---|---|", *tracks, "",
-             f"Run time: {(time.perf_counter() - start) / 60:.1f} min."]
-    out.write_text("\n".join(lines) + "\n")
-    print(f"wrote {out}")
-    return 0
+             "| median |", "|---|---|---|---|---|---|", *tracks]
+    return write_results(out, lines, start)
 
 
 if __name__ == "__main__":
