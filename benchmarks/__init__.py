@@ -56,6 +56,20 @@ def results_parser(path: str, doc: str) -> argparse.ArgumentParser:
     return parser
 
 
+def begin(parser: argparse.ArgumentParser, argv: list[str] | None, path: str, title: str
+          ) -> tuple[argparse.Namespace, Path, float, list[str]]:
+    """Start the benchmark in file ``path`` (its ``__file__``): ``argv`` parsed by ``parser``
+    (a :func:`results_parser`), its ``--output`` checked (refused when it exists, unless
+    ``--force``), the clock read; ``(args, output, started, lines)`` with the results file's
+    first lines (the ``title`` heading and the command that reruns it)."""
+    from lhgraph.io.files import check_writable  # only when run: listing imports nothing
+
+    args = parser.parse_args(argv)
+    out = check_writable(args.output, args.force)
+    return args, out, time.perf_counter(), [f"# {title}", "",
+                                             f"Command: `{command(path, argv)}`  "]
+
+
 def write_results(out: Path, lines: list[str], started: float) -> int:
     """Write a benchmark's markdown ``lines`` to ``out`` with a last line giving the run
     time since ``started`` (a ``time.perf_counter()`` reading), say so; 0 (the exit code)."""

@@ -1,6 +1,8 @@
 """``python -m benchmarks [--list]`` lists the benchmarks with their one-line descriptions;
 ``python -m benchmarks NAME [ARGS...]`` runs benchmark NAME's ``main(ARGS)`` and exits with
-its code; an unknown NAME is one line on stderr and exit code 2."""
+its code; an unknown NAME, or bad input to the benchmark (an lhgraph ``InputError``: an
+existing output without ``--force``, a file that is not what it should be), is one line on
+stderr and exit code 2."""
 
 from __future__ import annotations
 
@@ -26,7 +28,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"python -m benchmarks: unknown benchmark {name!r} (python -m benchmarks --list "
               "names them)", file=sys.stderr)
         return 2
-    return int(importlib.import_module(f"benchmarks.{name}").main(rest) or 0)
+    module = importlib.import_module(f"benchmarks.{name}")
+    from lhgraph.errors import InputError  # after the listing, which imports nothing
+
+    try:
+        return int(module.main(rest) or 0)
+    except InputError as exc:
+        print(f"python -m benchmarks {name}: error: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

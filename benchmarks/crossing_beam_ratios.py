@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
+from dataclasses import dataclass
 from datetime import date
 from pathlib import Path
 
@@ -31,6 +32,7 @@ import numpy as np
 from benchmarks.compare_pairs import imported_logs, solve_imported
 from benchmarks.crazyflie_evaluation import _mocap_at, aligned_errors, crossing_beam_positions
 from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.geometry.kabsch import weighted_kabsch
 from lhgraph.io.angles import load_angles
 from lhgraph.io.files import read_csv_columns
 from lhgraph.io.stations import Stations, load_stations
@@ -55,9 +57,26 @@ def similarity_fit(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarray, np.
     return s, R, mq - s * R @ mp
 
 
-def judged(work: Path, stations: Stations) -> dict[str, float]:
-    """Median crossing-beam error (mm) of ``stations`` on the imported log ``work`` after
-    the best rigid fit, and the similarity fit's scale and median error (mm)."""
+@dataclass(frozen=True)
+class MocapFrame:
+    """An imported log's Qualisys recording aligned to a geometry: the mocap samples' log
+    ``time`` (s, shifted by the best start and end offsets) and ``position`` (N, 3, m,
+    Qualisys frame); the best rigid fit ``T_mocap_world`` of the geometry's crossing-beam
+    positions ``beam_time``, ``beam_position`` (world) onto the mocap; ``rigid_errors`` (m)
+    after it."""
+
+    time: np.ndarray
+    position: np.ndarray
+    T_mocap_world: np.ndarray
+    beam_time: np.ndarray
+    beam_position: np.ndarray
+    rigid_errors: np.ndarray
+
+
+def mocap_frame(work: Path, stations: Stations) -> MocapFrame:
+    """The imported log ``work``'s mocap aligned in time and space to ``stations`` through the
+    log's correctedAngle as crossing-beam positions (``crazyflie_evaluation``'s measure
+    (b))."""
     angles = load_angles(work / "angles.csv")
     mocap = read_csv_columns(work / "mocap.csv",
                              [("time", float), ("x", float), ("y", float), ("z", float)])
@@ -68,9 +87,19 @@ def judged(work: Path, stations: Stations) -> dict[str, float]:
     shifted = t_m + d0 + (d1 - d0) * (t_m - t_m[0]) / (t_m[-1] - t_m[0])
     q = _mocap_at(shifted, p_m, t)
     ok = np.all(np.isfinite(q), axis=1)
+    return MocapFrame(shifted, p_m, weighted_kabsch(p[ok], q[ok]), t, p, e)
+
+
+def judged(work: Path, stations: Stations) -> dict[str, float]:
+    """Median crossing-beam error (mm) of ``stations`` on the imported log ``work`` after
+    the best rigid fit, and the similarity fit's scale and median error (mm)."""
+    m = mocap_frame(work, stations)
+    q = _mocap_at(m.time, m.position, m.beam_time)
+    ok = np.all(np.isfinite(q), axis=1)
+    p = m.beam_position
     s, R, tr = similarity_fit(p[ok], q[ok])
     es = np.linalg.norm(s * p[ok] @ R.T + tr - q[ok], axis=1)
-    return {"rigid_mm": float(np.median(e)) * 1e3, "scale": s,
+    return {"rigid_mm": float(np.median(m.rigid_errors)) * 1e3, "scale": s,
             "similarity_mm": float(np.median(es)) * 1e3}
 
 

@@ -64,6 +64,18 @@ def test_runner_refuses_an_unknown_name():
     assert "unknown benchmark 'no_such_benchmark'" in proc.stderr
 
 
+def test_runner_refuses_to_replace_a_results_file_in_one_line(tmp_path):
+    """An existing output without --force is bad input: one line naming it, exit 2, the file
+    untouched (checked before any work)."""
+    out = tmp_path / "results.md"
+    out.write_text("earlier results\n")
+    proc = runner("anchored_stations", "--output", str(out))
+    assert proc.returncode == 2
+    assert proc.stdout == "" and len(proc.stderr.splitlines()) == 1
+    assert str(out) in proc.stderr and "--force" in proc.stderr
+    assert out.read_text() == "earlier results\n"
+
+
 def test_runner_passes_the_arguments_on(capsys):
     with pytest.raises(SystemExit) as exit_:
         run(["crlb", "--help"])

@@ -1,0 +1,171 @@
+"""The shared Crazyflie logs' stations anchored to their Qualisys recordings: a reference
+geometry that owes nothing to our receiver path, and every geometry judged against it.
+
+    python -m benchmarks anchored_stations [--output FILE] [--force]
+
+Pairs of recordings of unmoved stations say whether two solves agree, not which is right.
+Each Bitcraze log also records the deck's position with Qualisys, so each station can be
+resected from a known path (:mod:`lhgraph.estimation.resection`): the board's position at
+every hit is the mocap's (less the marker body's lever, solved with the stations), its
+orientation ours (the graph's path, rotated into the Qualisys frame by the rigid fit of the
+crossing-beam positions: a degree of orientation error moves a diode 15 mm from the centre by
+0.3 mm), and each station's six pose parameters are fitted to its angles with the decoded
+factory model, nothing else estimated. Per log:
+
+1. the fit: hits used, median absolute residual; station 1's distance from station 0;
+2. our default solve (`lhgraph solve`'s graph) and cfclient's geometry (the log's
+   `system-config.yaml`) against the anchored one: station 1 in station 0's frame, the
+   position difference (mm), its part along the baseline (mm; negative: too short) and the
+   rotation difference (deg);
+3. the marker body's lever (board frame) and how far station 1 moves when it is held at
+   zero (the marker body's origin taken as the deck's centre);
+4. the stations' heights above the receiver's first mocap sample, Qualisys z as up (the
+   height a z-up export whose origin is the receiver at its first rest should give).
+
+Then per same-generation pair, station 1's difference between the two logs, anchored and
+ours. Writes docs/results/anchored_stations.md. Data: Crazyflie (no licence: read from
+../shared only). ~2 min.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass
+from datetime import date
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks import begin, results_parser, write_results
+from benchmarks.compare_pairs import DEG, imported_logs, solve_imported
+from benchmarks.crazyflie_evaluation import _mocap_at
+from benchmarks.crossing_beam_ratios import mocap_frame
+from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.resection import resect_stations
+from lhgraph.estimation.result import SolveResult
+from lhgraph.geometry.transforms import inverse, rotation_angle
+from lhgraph.io.angles import load_angles
+from lhgraph.io.stations import Station, Stations, load_stations, save_stations
+from lhgraph.model.board import load_board
+from lhgraph.model.calibration import load_calibration
+
+LOGS = ("lh1_crossingBeam_move/log02", "lh1_crossingBeam_flight/log00",
+        "lh2_crossingBeam_move/log00", "lh2_crossingBeam_move/log01")
+PAIRS = (("lh1_crossingBeam_move/log02", "lh1_crossingBeam_flight/log00"),
+         ("lh2_crossingBeam_move/log00", "lh2_crossingBeam_move/log01"))
+
+
+@dataclass(frozen=True)
+class Anchored:
+    """One log's stations resected in the Qualisys frame: ``T_mocap_lh`` by station, the
+    marker body's origin ``lever_m`` in the board frame (m), the hits used and their median
+    absolute residual (rad), the mocap's first sample (m)."""
+
+    T_mocap_lh: dict[int, np.ndarray]
+    lever_m: np.ndarray
+    hits: int
+    median_residual_rad: float
+    first_sample_m: np.ndarray
+
+
+def anchored(work: Path, result: SolveResult, solve_lever: bool = True) -> Anchored:
+    """The imported log ``work``'s stations resected on its mocap path, the marker body's
+    lever solved (or held at the deck's centre); orientations and the alignment from
+    ``result`` (a solve of the log)."""
+    frame = mocap_frame(work, result.stations)
+    angles = load_angles(work / "angles.csv")
+    p = _mocap_at(frame.time, frame.position, angles.time)
+    seen = np.all(np.isfinite(p), axis=1)
+    a = angles.select(seen)
+    T = frame.T_mocap_world @ result.trajectory.at(a.time)
+    T[:, :3, 3] = p[seen]
+    models = {k: c.model() for k, c in load_calibration(work / "ootx.toml").items()}
+    starts = {k: frame.T_mocap_world @ result.stations.pose(k)
+              for k in result.stations.indices()}
+    r = resect_stations(T, load_board(work / "board.toml").positions[a.sensor], a.lighthouse,
+                        a.axis, a.angle, models, starts, solve_lever=solve_lever)
+    first = frame.position[np.argmin(frame.time)]
+    return Anchored(r.T_ref_lh, r.lever_m, len(a), r.median_abs_residual_rad, first)
+
+
+def save_anchored(work: Path, result: SolveResult) -> tuple[Anchored, Path]:
+    """The imported log ``work``'s anchored stations (:func:`anchored`, lever solved) and the
+    stations TOML ``work/stations-anchored.toml`` (Qualisys frame, ``result``'s models) they
+    were written to."""
+    ref = anchored(work, result)
+    path = save_stations(Stations(0, {k: Station(T, model=result.stations.stations[k].model)
+                                      for k, T in ref.T_mocap_lh.items()}),
+                         work / "stations-anchored.toml", overwrite=True)
+    return ref, path
+
+
+def station_1(T: dict[int, np.ndarray]) -> np.ndarray:
+    """Station 1's pose in station 0's frame."""
+    return inverse(T[0]) @ T[1]
+
+
+def difference(A: np.ndarray, B: np.ndarray) -> tuple[float, float, float]:
+    """Poses ``A - B``: position (mm), its part along ``B``'s baseline from the origin (mm),
+    rotation (deg)."""
+    d = A[:3, 3] - B[:3, 3]
+    u = B[:3, 3] / np.linalg.norm(B[:3, 3])
+    return (float(np.linalg.norm(d)) * 1e3, float(d @ u) * 1e3,
+            float(rotation_angle(A[:3, :3].T @ B[:3, :3])) * DEG)
+
+
+def cells(A: np.ndarray, B: np.ndarray) -> str:
+    """``difference(A, B)`` as three table cells."""
+    dp, along, dr = difference(A, B)
+    return f"{dp:.1f} | {along:+.1f} | {dr:.3f}"
+
+
+def geometry(stations: Stations) -> dict[int, np.ndarray]:
+    """``T_world_lh`` by station."""
+    return {k: stations.pose(k) for k in stations.indices()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    _, out, started, lines = begin(results_parser(__file__, __doc__), argv, __file__,
+                                   "The Crazyflie logs' stations anchored to the mocap")
+    lines += [f"{date.today()}; each station resected on the log's Qualisys path "
+             "(benchmarks/anchored_stations.py, docs/crazyflie.md); station 1 in station 0's "
+             "frame; differences: position (mm), its part along the baseline (mm, negative: "
+             "too short), rotation (deg).", "",
+             "| log | hits | median residual (µrad) | anchored distance (m) "
+             "| ours - anchored | | | cfclient - anchored | | | marker lever (mm) "
+             "| lever held at 0: shift (mm) | heights, anchored (m) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    ours_by_log: dict[str, np.ndarray] = {}
+    anchored_by_log: dict[str, np.ndarray] = {}
+    with tempfile.TemporaryDirectory(prefix="lhgraph-anchored-") as tmp:
+        for log, work in imported_logs(LOGS, Path(tmp)):
+            if work is None:
+                lines.append(f"| {log} | skipped: data absent |" + " |" * 11)
+                continue
+            result = solve_imported(work, GraphOptions())
+            ref = anchored(work, result)
+            held = anchored(work, result, solve_lever=False)
+            truth = station_1(ref.T_mocap_lh)
+            ours = station_1(geometry(result.stations))
+            theirs = station_1(geometry(load_stations(work / "stations-cfclient.toml")))
+            ours_by_log[log], anchored_by_log[log] = ours, truth
+            shift = np.linalg.norm(station_1(held.T_mocap_lh)[:3, 3] - truth[:3, 3]) * 1e3
+            lever = ", ".join(f"{v * 1e3:+.0f}" for v in ref.lever_m)
+            heights = " / ".join(f"{T[2, 3] - ref.first_sample_m[2]:.3f}"
+                                 for _, T in sorted(ref.T_mocap_lh.items()))
+            lines.append(f"| {log} | {ref.hits} | {ref.median_residual_rad * 1e6:.0f} | "
+                         f"{np.linalg.norm(truth[:3, 3]):.4f} | {cells(ours, truth)} | "
+                         f"{cells(theirs, truth)} | {lever} | {shift:.1f} | {heights} |")
+            print(lines[-1], flush=True)
+    lines += ["", "## Pairs of logs of unmoved stations", "",
+              "Station 1's difference between the two logs (first - second).", "",
+              "| pair | anchored | | | ours | | |", "|---|---|---|---|---|---|---|"]
+    for a, b in PAIRS:
+        if a in anchored_by_log and b in anchored_by_log:
+            lines.append(f"| {a} / {b} | {cells(anchored_by_log[a], anchored_by_log[b])} | "
+                         f"{cells(ours_by_log[a], ours_by_log[b])} |")
+    return write_results(out, lines, started)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
