@@ -30,7 +30,7 @@ ours. Writes docs/results/anchored_stations.md. Data: Crazyflie (no licence: rea
 from __future__ import annotations
 
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import date
 from pathlib import Path
 
@@ -40,7 +40,9 @@ from benchmarks import begin, results_parser, write_results
 from benchmarks.compare_pairs import DEG, imported_logs, solve_imported
 from benchmarks.crazyflie_evaluation import _mocap_at
 from benchmarks.crossing_beam_ratios import mocap_frame
+from lhgraph.estimation.graph.block_covariance import receiver_scale_covariance
 from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.layout_compare import compare_layouts
 from lhgraph.estimation.resection import resect_stations
 from lhgraph.estimation.result import SolveResult
 from lhgraph.geometry.transforms import inverse, rotation_angle
@@ -124,6 +126,29 @@ def geometry(stations: Stations) -> dict[int, np.ndarray]:
     return {k: stations.pose(k) for k in stations.indices()}
 
 
+def in_sigmas(log: str, ref: Anchored, result: SolveResult) -> str:
+    """A table row: ``result``'s stations against the anchored stations ``ref`` in the
+    result's own sigmas (:func:`~lhgraph.estimation.layout_compare.compare_layouts`, the
+    anchored stations given no uncertainty of their own), also with the honest covariance
+    less its receiver-scale share."""
+    zero = np.zeros((6, 6))
+    pinned = Stations(0, {k: Station(T, covariance=zero, covariance_white=zero)
+                          for k, T in ref.T_mocap_lh.items()})
+    ours = result.stations
+    d = compare_layouts(pinned, ours, reference=0).differences[0]
+    scale = (result.options or {}).get("uncertainty", {}).get("receiver_scale_sigma") or 0.0
+    blocks = Stations(ours.reference, {k: replace(s, covariance=s.covariance
+                                                  - receiver_scale_covariance(s.T_world_lh,
+                                                                              scale))
+                                       for k, s in ours.stations.items()})
+    b = compare_layouts(pinned, blocks, reference=0).differences[0]
+    return (f"| {log} | {d.position_m * 1e3:.1f} | {d.sigma_position_m * 1e3:.2f} | "
+            f"{d.position_sigmas:.1f} | {scale:g} | {b.sigma_position_m * 1e3:.2f} | "
+            f"{b.position_sigmas:.1f} | {d.sigma_white_position_m * 1e3:.2f} | "
+            f"{d.position_m / d.sigma_white_position_m:.0f} | {d.rotation_rad * DEG:.3f} | "
+            f"{d.sigma_rotation_rad * DEG:.4f} | {d.rotation_sigmas:.1f} |")
+
+
 def main(argv: list[str] | None = None) -> int:
     _, out, started, lines = begin(results_parser(__file__, __doc__), argv, __file__,
                                    "The Crazyflie logs' stations anchored to the mocap")
@@ -135,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
              "| ours - anchored | | | cfclient - anchored | | | marker lever (mm) "
              "| lever held at 0: shift (mm) | heights, anchored (m) |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    sigmas: list[str] = []
     ours_by_log: dict[str, np.ndarray] = {}
     anchored_by_log: dict[str, np.ndarray] = {}
     with tempfile.TemporaryDirectory(prefix="lhgraph-anchored-") as tmp:
@@ -157,6 +183,17 @@ def main(argv: list[str] | None = None) -> int:
                          f"{np.linalg.norm(truth[:3, 3]):.4f} | {cells(ours, truth)} | "
                          f"{cells(theirs, truth)} | {lever} | {shift:.1f} | {heights} |")
             print(lines[-1], flush=True)
+            sigmas.append(in_sigmas(log, ref, result))
+    lines += ["", "## Ours against the anchored stations in our own sigmas", "",
+              "Station 1 (in station 0's frame): the difference over the sigma our result "
+              "reports along it, honest (the verdict's; with the receiver scale's share of "
+              "the resolved `receiver_scale_sigma`, and without it) and white "
+              "(docs/uncertainty.md).", "",
+              "| log | position (mm) | honest sigma (mm) | in honest sigmas "
+              "| receiver_scale_sigma | honest less the scale's share (mm) | in those sigmas "
+              "| white sigma (mm) | in white sigmas | rotation (deg) | honest sigma (deg) "
+              "| in honest sigmas |", "|---|---|---|---|---|---|---|---|---|---|---|---|",
+              *sigmas]
     lines += ["", "## Pairs of logs of unmoved stations", "",
               "Station 1's difference between the two logs (first - second).", "",
               "| pair | anchored | | | ours | | |", "|---|---|---|---|---|---|---|"]

@@ -32,6 +32,7 @@ import numpy as np
 import benchmarks._single_thread  # noqa: F401  (one BLAS thread per process)
 from benchmarks import write_results
 from benchmarks.compare_pairs import DATA, PAIRS, ROOT, imported, solve_imported
+from benchmarks.deck_benchmark import EXACT_DECK
 from benchmarks.joint_captures import nees
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.solver import solve_graph
@@ -66,8 +67,8 @@ def simulated_row(name: str, config: str, duration_s: float, terms: str) -> str:
         truth = {k: s.model for k, s in sim.truth.stations.items()}
         given = with_factory_errors(truth, terms.split(","), PERTURBATION_RAD,
                                     np.random.default_rng(seed))
-        for label, options in (("held", GraphOptions()),
-                               ("solved", GraphOptions.of(factory_terms=terms))):
+        for label, options in (("held", EXACT_DECK),
+                               ("solved", EXACT_DECK.with_values(factory_terms=terms))):
             tic = time.perf_counter()
             result = solve_graph(sim.board, sim.angles, given, options)
             figures[f"{label}_s"].append(time.perf_counter() - tic)

@@ -25,7 +25,12 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from lhgraph.estimation.graph.block_covariance import block_length_s, block_sandwich, floor_at
+from lhgraph.estimation.graph.block_covariance import (
+    block_length_s,
+    block_sandwich,
+    floor_at,
+    receiver_scale_covariance,
+)
 from lhgraph.estimation.graph.linear_system import linear_system
 from lhgraph.estimation.graph.options import GraphOptions, UncertaintyOptions
 from lhgraph.estimation.graph.solver import solve_graph
@@ -126,6 +131,32 @@ def test_solve_stores_both_and_white_is_gtsams(simulated):
         assert np.linalg.eigvalsh(s.covariance - s.covariance_white).min() > -1e-12
         ratio = np.trace(s.covariance[3:, 3:]) / np.trace(s.covariance_white[3:, 3:])
         assert 1.0 <= ratio < 4.0, ratio
+
+
+def test_receiver_scale_covariance_is_the_scaled_position_in_the_stations_frame():
+    """A station 3 m out along x, turned 90 deg about z: the world scaled by 1 + k moves it
+    by 3k m along world x, which is its own -y; nothing turns."""
+    T = np.eye(4)
+    T[:3, :3] = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
+    T[:3, 3] = [3.0, 0.0, 0.0]
+    C = receiver_scale_covariance(T, 0.01)
+    expected = np.zeros((6, 6))
+    expected[4, 4] = 0.03**2
+    np.testing.assert_allclose(C, expected, atol=1e-15)
+    np.testing.assert_array_equal(receiver_scale_covariance(np.eye(4), 0.01), 0.0)
+
+
+def test_receiver_scale_sigma_widens_the_honest_covariance_only(simulated):
+    sim, models = simulated
+    base = solve_graph(sim.board, sim.angles, models)
+    scaled = solve_graph(sim.board, sim.angles, models,
+                         GraphOptions.of(receiver_scale_sigma=0.005))
+    assert base.options["uncertainty"]["receiver_scale_sigma"] == 0.0  # many diodes: none
+    for k, s in scaled.stations.stations.items():
+        b = base.stations.stations[k]
+        np.testing.assert_allclose(s.covariance_white, b.covariance_white, rtol=1e-9)
+        np.testing.assert_allclose(s.covariance - b.covariance,
+                                   receiver_scale_covariance(s.T_world_lh, 0.005), atol=1e-12)
 
 
 def test_covariance_white_round_trips_through_the_stations_file(simulated, tmp_path):

@@ -22,7 +22,7 @@ from lhgraph.estimation.graph.optimizer import (
     remaining_sigmas,
 )
 from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.resolve import DataFacts, resolve_options
+from lhgraph.estimation.graph.resolve import FEW_DIODE_SCALE_SIGMA, DataFacts, resolve_options
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.graph.variables import (
     BOARD_POSE,
@@ -301,6 +301,27 @@ def test_robust_loss_is_gtsams_estimator(kind):
                                [estimator.weight(v) for v in x[1:]], rtol=1e-14)
     with pytest.raises(SolverError, match="unknown loss"):
         RobustLoss("tukey", 3.0)
+
+
+def test_receiver_scale_sigma_resolves_by_receiver():
+    """Rule 9: few-diode data get FEW_DIODE_SCALE_SIGMA unless the board's scale is solved
+    (the IMU stage); many diodes none; a value given is kept."""
+    few, many = DataFacts(True, False, 0), DataFacts(False, False, 0)
+
+    def resolved(options, facts, inertial=False):
+        return resolve_options(options, facts, inertial).options.uncertainty.receiver_scale_sigma
+
+    assert resolved(GraphOptions(), few) == FEW_DIODE_SCALE_SIGMA
+    assert resolved(GraphOptions(), many) == 0.0
+    scale = GraphOptions.of(board_scale_sigma=0.02)
+    assert resolved(scale, few, inertial=True) == 0.0
+    assert resolved(scale, few, inertial=False) == FEW_DIODE_SCALE_SIGMA  # light-only stage
+    assert resolved(GraphOptions.of(receiver_scale_sigma=0.0), few) == 0.0
+    assert resolved(GraphOptions.of(receiver_scale_sigma=0.01), many) == 0.01
+    line = [a for a in resolve_options(GraphOptions(), few).applied
+            if a.startswith("receiver_scale_sigma")]
+    assert line == [f"receiver_scale_sigma = {FEW_DIODE_SCALE_SIGMA!r} (unset: few-diode data, "
+                    "the board's scale not solved; given None)"]
 
 
 def test_covariance_from_the_last_iteration_matches_marginals_at_the_result():

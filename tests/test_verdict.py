@@ -98,6 +98,18 @@ def test_verdict_status_and_reasons_name_their_cause():
     assert g.failed and "not g" in g.text()
 
 
+def test_a_wide_sigma_names_the_receivers_size_when_that_is_most_of_it():
+    summary = _summary()
+    summary["stations"]["1"] = {"sigma_position_mm": [3.0, 24.0, 3.0],
+                                "position_m": [2.4, -3.1, 1.7]}
+    plain = verdict(summary)
+    assert plain.status == "check" and "poorly determined" in plain.text()
+    summary["resolved_options"] = {"uncertainty": {"receiver_scale_sigma": 0.006}}
+    scaled = verdict(summary)
+    assert scaled.status == "check" and "poorly determined" not in scaled.text()
+    assert "26 mm of it the receiver's size" in scaled.text()  # 0.6 % of 4.3 m
+
+
 def _track(folder: Path, stations: Path, out: Path, *extra: str) -> int:
     return main(["track", "--stations", str(stations), "--board", str(folder / "board.toml"),
                  "--angles", str(folder / "angles.csv"), "--output", str(out), *extra])

@@ -151,6 +151,19 @@ def _not_converged(status: str, iterations: int | None) -> str:
     return f"the solver stopped before converging ({status}{after})"
 
 
+def _sigma_reason(station: str, sigma_mm: float, scale: float,
+                  position_m: list[float] | None) -> str:
+    """The verdict's reason for a station whose position 1-sigma ``sigma_mm`` is over
+    :data:`MAX_SIGMA_MM`, naming the receiver scale's share when it is most of it (relative
+    spread ``scale`` times the station's distance from the world's origin, the reference)."""
+    share = scale * float(np.linalg.norm(position_m)) * 1e3 if position_m else 0.0
+    if share < 0.5 * sigma_mm:
+        return f"station {station} poorly determined (position 1-sigma {sigma_mm:.1f} mm)"
+    return (f"station {station} position 1-sigma {sigma_mm:.1f} mm, {share:.0f} mm of it the "
+            f"receiver's size (receiver_scale_sigma {scale:g}: angles cannot see a scale and "
+            "a few-diode receiver's centimetres set it; docs/uncertainty.md)")
+
+
 def verdict(summary: dict[str, Any], coverages: dict[int, float] | None = None) -> Verdict:
     """The verdict on one method's run from its ``summary.json`` document (``status``,
     ``iterations``, ``warnings``, ``residuals``, ``stations``) and the board's
@@ -174,11 +187,13 @@ def verdict(summary: dict[str, Any], coverages: dict[int, float] | None = None) 
                            f"spread {v:.0f} µrad, over {MAX_SPREAD_RATIO:g} x the best "
                            f"station/axis's {min(spreads.values()):.0f} µrad: its view is "
                            "not explained well")
+    scale = ((summary.get("resolved_options") or {}).get("uncertainty") or {}).get(
+        "receiver_scale_sigma") or 0.0
     for k, s in summary["stations"].items():
         sp = s.get("sigma_position_mm")
         if sp and float(np.linalg.norm(sp)) > MAX_SIGMA_MM:
-            reasons.append(f"station {k} poorly determined (position 1-sigma "
-                           f"{np.linalg.norm(sp):.1f} mm)")
+            reasons.append(_sigma_reason(k, float(np.linalg.norm(sp)), scale,
+                                         s.get("position_m")))
     for k, c in (coverages or {}).items():
         if c < MIN_COVERAGE:
             reasons.append(f"station {k}: the board covered only {100 * c:.0f} % of its view "
@@ -191,10 +206,12 @@ def result_verdict(result: SolveResult, angles: Angles) -> Verdict:
     """:func:`verdict` of a solve's result on its ``angles`` (what ``lhgraph solve`` prints
     and stores without a run directory)."""
     stations = {str(k): {"sigma_position_mm": None if s.covariance is None else
-                         (np.sqrt(np.diag(s.covariance)[3:]) * 1e3).tolist()}
+                         (np.sqrt(np.diag(s.covariance)[3:]) * 1e3).tolist(),
+                         "position_m": s.T_world_lh[:3, 3].tolist()}
                 for k, s in result.stations.stations.items()}
     summary = {"status": result.status, "iterations": result.iterations,
                "warnings": result.warnings, "stations": stations,
+               "resolved_options": result.options,
                "residuals": residual_statistics(result.residuals) if result.residuals else None}
     return verdict(summary, {k: coverage(view_points(angles, k)) for k in angles.stations()})
 

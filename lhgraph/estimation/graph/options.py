@@ -293,12 +293,18 @@ class UncertaintyOptions:
     time blocks, each at least ``min_block_s`` long. ``factory_information``: also how well
     the capture determines each station's factory terms at the result
     (:mod:`lhgraph.estimation.graph.factory_information`; the result's
-    ``factory_information``)."""
+    ``factory_information``). ``receiver_scale_sigma``: the receiver's scale uncertainty
+    (relative) added to the honest covariance, as a world scaled about the reference station
+    (angles cannot see a scale: a receiver a fraction ``k`` larger than its file puts every
+    station ``k`` farther out); None: the resolved default, on few-diode data without a
+    solved board scale ``FEW_DIODE_SCALE_SIGMA`` of
+    :mod:`~lhgraph.estimation.graph.resolve`, else 0 (docs/uncertainty.md)."""
 
     covariance: str = option("blocks", choices=COVARIANCES)
     covariance_blocks: int = option(30, ge=2, le=10000)
     min_block_s: float = option(0.5, gt=0)
     factory_information: bool = option(False)
+    receiver_scale_sigma: float | None = option(None, kind=float, ge=0, lt=0.5)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -23,7 +23,11 @@ kept in its result and ``summary.json``):
 8. ``board_scale_sigma`` > 0 in a calibration without IMU factors (the light-only stage
    before the IMU refinement): 0. Angles cannot see the board's scale, and a free scale
    shrinks under the motion prior (smaller accelerations cost less: on a simulated deck
-   capture it ran to -73 %); the IMU stage solves it.
+   capture it ran to -73 %); the IMU stage solves it;
+9. ``receiver_scale_sigma`` unset: ``FEW_DIODE_SCALE_SIGMA`` on few-diode data whose board
+   scale is not solved (``board_scale_sigma`` 0), else 0. A few-diode deck's size sets the
+   scale of everything solved from it, and on the shared Crazyflie logs the mocap puts our
+   station 1 0.38-0.84 % too close (benchmarks/anchored_stations.py, docs/uncertainty.md).
 """
 
 from __future__ import annotations
@@ -43,6 +47,10 @@ FEW_DIODES = 5
 """The default initialiser's PnP needs this many diodes with both angles per measurement:
 data whose median sweep holds fewer is few-diode."""
 STEP_TOLERANCE_SIGMA = 0.05
+FEW_DIODE_SCALE_SIGMA = 0.006
+"""The receiver-scale uncertainty (relative) of few-diode data: the rms of station 1's
+shortfall along the baseline against the mocap-anchored stations on the four shared
+Crazyflie logs (0.68, 0.84, 0.38, 0.40 %; docs/results/anchored_stations.md)."""
 """The stations' test of the stopping rule where the options leave it unset: LM stops when
 they are estimated within this many standard deviations of convergence."""
 
@@ -174,5 +182,12 @@ def resolve_options(options: GraphOptions, facts: DataFacts, inertial: bool = Fa
     if flat["board_scale_sigma"] > 0 and not inertial and not tracking:
         set_to("board_scale_sigma", 0.0, "light-only stage: the IMU refinement solves the "
                "board's scale")
+    if flat["receiver_scale_sigma"] is None:
+        solved = flat["board_scale_sigma"] > 0
+        set_to("receiver_scale_sigma",
+               FEW_DIODE_SCALE_SIGMA if facts.few_diode and not solved else 0.0,
+               "unset: few-diode data, the board's scale not solved" if facts.few_diode
+               and not solved else "unset: the board's scale solved" if solved
+               else "unset: a receiver of many diodes")
     return Resolution(options.with_values(**new) if new else options, tuple(applied))
 
