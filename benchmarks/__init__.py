@@ -56,15 +56,17 @@ def results_parser(path: str, doc: str) -> argparse.ArgumentParser:
     return parser
 
 
-def begin(parser: argparse.ArgumentParser, argv: list[str] | None, path: str, title: str
+def begin(path: str, doc: str, argv: list[str] | None, title: str,
+          parser: argparse.ArgumentParser | None = None
           ) -> tuple[argparse.Namespace, Path, float, list[str]]:
-    """Start the benchmark in file ``path`` (its ``__file__``): ``argv`` parsed by ``parser``
-    (a :func:`results_parser`), its ``--output`` checked (refused when it exists, unless
-    ``--force``), the clock read; ``(args, output, started, lines)`` with the results file's
-    first lines (the ``title`` heading and the command that reruns it)."""
+    """Start the benchmark in file ``path`` (its ``__file__``, docstring ``doc``): ``argv``
+    parsed by ``parser`` (default: a plain :func:`results_parser`), its ``--output`` checked
+    (refused when it exists, unless ``--force``), the clock read; ``(args, output, started,
+    lines)`` with the results file's first lines (the ``title`` heading and the command that
+    reruns it)."""
     from lhgraph.io.files import check_writable  # only when run: listing imports nothing
 
-    args = parser.parse_args(argv)
+    args = (parser or results_parser(path, doc)).parse_args(argv)
     out = check_writable(args.output, args.force)
     return args, out, time.perf_counter(), [f"# {title}", "",
                                              f"Command: `{command(path, argv)}`  "]

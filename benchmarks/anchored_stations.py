@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import begin, results_parser, write_results
+from benchmarks import begin, write_results
 from benchmarks.compare_pairs import DEG, imported_logs, solve_imported
 from benchmarks.crazyflie_evaluation import _mocap_at
 from benchmarks.crossing_beam_ratios import mocap_frame
@@ -150,7 +150,7 @@ def in_sigmas(log: str, ref: Anchored, result: SolveResult) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    _, out, started, lines = begin(results_parser(__file__, __doc__), argv, __file__,
+    _, out, started, lines = begin(__file__, __doc__, argv,
                                    "The Crazyflie logs' stations anchored to the mocap")
     lines += [f"{date.today()}; each station resected on the log's Qualisys path "
              "(benchmarks/anchored_stations.py, docs/crazyflie.md); station 1 in station 0's "

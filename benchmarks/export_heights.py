@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import begin, results_parser, write_results
+from benchmarks import begin, write_results
 from benchmarks.anchored_stations import save_anchored
 from benchmarks.compare_pairs import CF, DATA, imported_logs, lhgraph, solve_imported
 from lhgraph.estimation.graph.options import GraphOptions
@@ -113,7 +113,7 @@ def row(log: str, work: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    _, out, start, lines = begin(results_parser(__file__, __doc__), argv, __file__,
+    _, out, start, lines = begin(__file__, __doc__, argv,
                                  "The cfclient export's station heights against cfclient's")
     lines += [f"{date.today()}; the README's workflow per log (import, solve, track, export "
              "cfclient --imu --trajectory); heights in m, station 0 / 1; differences in mm "

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import savgol_filter
 
-from benchmarks import begin, results_parser, write_results
+from benchmarks import begin, write_results
 from benchmarks.compare_pairs import imported_logs
 from lhgraph.io.files import read_csv_columns
 
@@ -78,7 +78,7 @@ def compared(work: Path, window_s: float) -> tuple[float, float, float, int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    _, out, started, lines = begin(results_parser(__file__, __doc__), argv, __file__,
+    _, out, started, lines = begin(__file__, __doc__, argv,
                                    "The Crazyflie accelerometer against the mocap")
     lines += [f"{date.today()}; |f| - g of the accelerometer against the mocap's, both "
               "smoothed by a cubic Savitzky-Golay window W; per W: best correlation, the "
