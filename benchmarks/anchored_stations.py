@@ -40,9 +40,9 @@ from benchmarks import begin, write_results
 from benchmarks.compare_pairs import DEG, imported_logs, solve_imported
 from benchmarks.crazyflie_evaluation import _mocap_at
 from benchmarks.crossing_beam_ratios import mocap_frame
-from lhgraph.estimation.graph.block_covariance import receiver_scale_covariance
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.layout_compare import compare_layouts
+from lhgraph.estimation.receiver_scale import receiver_scale_covariance
 from lhgraph.estimation.resection import resect_stations
 from lhgraph.estimation.result import SolveResult
 from lhgraph.geometry.transforms import inverse, rotation_angle

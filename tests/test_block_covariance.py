@@ -25,16 +25,12 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from lhgraph.estimation.graph.block_covariance import (
-    block_length_s,
-    block_sandwich,
-    floor_at,
-    receiver_scale_covariance,
-)
+from lhgraph.estimation.graph.block_covariance import block_length_s, block_sandwich, floor_at
 from lhgraph.estimation.graph.linear_system import linear_system
 from lhgraph.estimation.graph.options import GraphOptions, UncertaintyOptions
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.graph.variables import BOARD_POSE, STATION_POSE, VariableLayout
+from lhgraph.estimation.receiver_scale import receiver_scale_covariance
 from lhgraph.io.stations import load_stations, save_stations
 from lhgraph.sim.simulate import load_simulation_config, simulate
 
@@ -152,6 +148,8 @@ def test_receiver_scale_sigma_widens_the_honest_covariance_only(simulated):
     scaled = solve_graph(sim.board, sim.angles, models,
                          GraphOptions.of(receiver_scale_sigma=0.005))
     assert base.options["uncertainty"]["receiver_scale_sigma"] == 0.0  # many diodes: none
+    assert "receiver_scale_sigma" not in base.stations.extra
+    assert scaled.stations.extra["receiver_scale_sigma"] == 0.005  # recorded for compare
     for k, s in scaled.stations.stations.items():
         b = base.stations.stations[k]
         np.testing.assert_allclose(s.covariance_white, b.covariance_white, rtol=1e-9)

@@ -15,6 +15,7 @@ import pytest
 from lhgraph.cli import main
 from lhgraph.errors import InputError
 from lhgraph.estimation.layout_compare import CompareOptions, compare_layouts
+from lhgraph.estimation.receiver_scale import RESULT_KEY, receiver_scale_covariance
 from lhgraph.geometry.transforms import se3_exp, so3_exp
 from lhgraph.io.stations import Station, Stations, save_stations
 
@@ -39,7 +40,7 @@ def _in_another_world(s: Stations) -> Stations:
     T_new_world = se3_exp([0.2, 0.5, -0.7, 3.0, -1.0, 2.0])
     return Stations(s.reference, {k: dataclasses.replace(st, T_world_lh=T_new_world
                                                          @ st.T_world_lh)
-                                  for k, st in s.stations.items()})
+                                  for k, st in s.stations.items()}, dict(s.extra))
 
 
 def test_same_layout_in_any_world():
@@ -62,6 +63,34 @@ def test_a_shifted_station_moved_by_its_shift_in_combined_sigmas():
     assert d[2].position_sigmas == pytest.approx(50 / (2 * np.sqrt(2)), rel=1e-6)
     assert np.isnan(d[2].sigma_white_position_m)  # the files have no white covariance
     assert c.verdict().startswith("station 2 moved by 50.0 mm / 0.00 deg (17.7 /")
+
+
+def _with_scale_share(s: Stations, sigma: float, recorded: bool = True) -> Stations:
+    """``s`` with each station's receiver-scale share added to its covariance, as a
+    few-diode solve gives, and the spread recorded in the result (or not)."""
+    return Stations(s.reference, {k: dataclasses.replace(
+        st, covariance=None if st.covariance is None else
+        st.covariance + receiver_scale_covariance(st.T_world_lh, sigma))
+        for k, st in s.stations.items()}, {RESULT_KEY: sigma} if recorded else {})
+
+
+def test_one_receivers_scale_share_is_taken_out_of_the_difference():
+    """Two results of one deck share its scale error: their 50 mm bump is judged against the
+    2 mm sigmas of the solves, not the ~40 mm the scale share adds along station 2's 3.2 m
+    baseline; results that do not record the share keep it."""
+    a = _layout(sigma_mm=2.0)
+    b = _moved(a, 2, dp_m=(0.03, 0.04, 0.0))
+    plain = compare_layouts(a, b).differences[1]
+    shared = compare_layouts(_with_scale_share(a, 0.01),
+                             _in_another_world(_with_scale_share(b, 0.01))).differences[1]
+    assert shared.station == plain.station == 2
+    # put back once: the scale's effect on the 50 mm difference itself, 0.5 mm
+    assert shared.sigma_position_m == pytest.approx(np.hypot(plain.sigma_position_m, 5e-4),
+                                                    rel=1e-6)
+    assert shared.moved
+    unrecorded = compare_layouts(_with_scale_share(a, 0.01, False),
+                                 _with_scale_share(b, 0.01, False)).differences[1]
+    assert unrecorded.sigma_position_m > 10 * plain.sigma_position_m
 
 
 def test_the_rule_needs_both_the_floor_and_k_sigma():

@@ -7,10 +7,12 @@ results of different worlds compare alike). For each other common station the di
 a rotation angle. Each file's ``covariance`` is of ``T_world_lh`` in its own body-frame
 tangent ``[rx, ry, rz, tx, ty, tz]`` (GTSAM's), which a change of world leaves unchanged
 while the reference station is held fixed (as every solve holds it); to first order the
-difference's covariance is the sum of the two, and each difference is also given in units
-of that combined sigma along its own direction. A station moved when its difference
-exceeds both ``k_sigma`` combined sigmas and a floor (the repeatability of real recordings,
-which the reported sigmas do not yet cover: docs/compare.md).
+difference's covariance is the sum of the two, and each difference is also given in units of
+that combined sigma along its own direction. Two results that both record a receiver-scale
+share (``receiver_scale_sigma``: few-diode solves) are taken as one receiver's: that share
+moves both alike and is taken out of their difference (docs/uncertainty.md). A station moved
+when its difference exceeds both ``k_sigma`` combined sigmas and a floor (the repeatability
+of real recordings, which the reported sigmas do not yet cover: docs/compare.md).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 
 from lhgraph.config import check_fields, option
 from lhgraph.errors import InputError
+from lhgraph.estimation.receiver_scale import receiver_scale_covariance, result_scale_sigma
 from lhgraph.geometry.transforms import inverse, rotation_angle, so3_log
 from lhgraph.io.stations import Stations
 
@@ -113,6 +116,22 @@ def _combined_sigmas(covs: list[np.ndarray | None], dp: np.ndarray, rotvec: np.n
     return _sigma_along(cov[3:, 3:], dp), _sigma_along(cov[:3, :3], rotvec)
 
 
+def _without_common_scale(results: list[Stations], k: int, sigma: float,
+                          dp_local: np.ndarray) -> list[np.ndarray | None]:
+    """Station ``k``'s honest covariances of ``results`` with their receiver-scale share of
+    spread ``sigma`` taken out, the share's effect on the difference itself (``dp_local``,
+    in the first result's station frame) put back once: two results of one receiver share
+    its scale error, which moves both alike (:mod:`lhgraph.estimation.receiver_scale`)."""
+    covs = [r.stations[k].covariance for r in results]
+    if sigma <= 0 or any(c is None for c in covs):
+        return covs
+    out = [c - receiver_scale_covariance(inverse(r.pose(r.reference)) @ r.pose(k), sigma)
+           for c, r in zip(covs, results, strict=True)]
+    out[0] = out[0].copy()
+    out[0][3:, 3:] += sigma**2 * np.outer(dp_local, dp_local)
+    return out
+
+
 def compare_layouts(a: Stations, b: Stations, reference: int | None = None,
                     options: CompareOptions | None = None) -> LayoutComparison:
     """Compare calibration ``b`` with ``a`` in the frame of a common station (``reference``,
@@ -129,6 +148,7 @@ def compare_layouts(a: Stations, b: Stations, reference: int | None = None,
         raise InputError(f"station {reference} is not in both results (common: "
                          f"{', '.join(map(str, common))})")
     T_ref_a, T_ref_b = (inverse(s.pose(reference)) for s in (a, b))
+    common_scale = min(result_scale_sigma(a), result_scale_sigma(b))
     diffs = []
     for k in common:
         if k == reference:
@@ -138,7 +158,8 @@ def compare_layouts(a: Stations, b: Stations, reference: int | None = None,
         dR = A[:3, :3].T @ B[:3, :3]
         # the position difference in A's station frame, where the covariance's translation is
         along = (A[:3, :3].T @ dp, so3_log(dR))
-        sigma_p, sigma_r = _combined_sigmas([s.stations[k].covariance for s in (a, b)], *along)
+        covs = _without_common_scale([a, b], k, common_scale, along[0])
+        sigma_p, sigma_r = _combined_sigmas(covs, *along)
         white = _combined_sigmas([s.stations[k].covariance_white for s in (a, b)], *along)
         position, rotation = float(np.linalg.norm(dp)), float(rotation_angle(dR))
         limit_p = max(options.floor_mm * 1e-3,

@@ -26,8 +26,8 @@ stations' estimate moves with the part of the path it was seen from:
    direction (:func:`floor_at`): with white residuals the two agree up to the sandwich's own
    scatter, with correlated ones the sandwich is the wider;
 6. with ``receiver_scale_sigma`` (resolved on few-diode data), plus the receiver scale's
-   share (:func:`receiver_scale_covariance`): angles cannot see a scale, so the receiver
-   file's size error scales the whole solved world about the reference station.
+   share (:mod:`lhgraph.estimation.receiver_scale`): angles cannot see a scale, so the
+   receiver file's size error scales the whole solved world about the reference station.
 
 The blocks are ``capture length / covariance_blocks`` long, at least ``min_block_s``
 (:class:`~lhgraph.estimation.graph.options.UncertaintyOptions`); docs/uncertainty.md gives
@@ -49,6 +49,7 @@ from lhgraph.estimation.graph.linear_system import linear_system, normal_solver
 from lhgraph.estimation.graph.optimizer import OptimizerResult
 from lhgraph.estimation.graph.options import UncertaintyOptions
 from lhgraph.estimation.graph.variables import BOARD_SCALE, FACTORY_TERMS, STATION_POSE
+from lhgraph.estimation.receiver_scale import receiver_scale_covariance
 
 Array = NDArray[np.float64]
 
@@ -142,17 +143,6 @@ def station_covariances(fit: OptimizerResult, ev: FactorEvaluator,
     if not options.factory_information:
         return found
     return replace(found, factory=factory_information(fit.graph, fit.values, ev))
-
-
-def receiver_scale_covariance(T_ref_lh: Array, sigma: float) -> Array:
-    """The covariance (6x6, tangent ``[rotation, translation]``) a receiver-scale uncertainty
-    of relative spread ``sigma`` gives a station at ``T_ref_lh`` (the reference station's
-    frame, m): the world scaled by ``1 + k`` about the reference moves the station's position
-    ``p`` by ``k p`` and turns nothing, ``k R^T p`` in its own translation tangent."""
-    v = T_ref_lh[:3, :3].T @ T_ref_lh[:3, 3]
-    C = np.zeros((6, 6))
-    C[3:, 3:] = sigma**2 * np.outer(v, v)
-    return C
 
 
 def station_covariances_only(fit: OptimizerResult, ev: FactorEvaluator,

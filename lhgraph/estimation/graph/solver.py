@@ -31,6 +31,7 @@ from lhgraph.estimation.init import Initialiser
 from lhgraph.estimation.init.few_diode import FewDiodeInitialiser
 from lhgraph.estimation.init.pnp_kabsch import PnPKabschInitialiser, chain_to_reference
 from lhgraph.estimation.problem import GraphProblem, build_problem
+from lhgraph.estimation.receiver_scale import RESULT_KEY
 from lhgraph.estimation.rests import thin_rests
 from lhgraph.estimation.result import Residuals, SolveResult
 from lhgraph.estimation.station_prior import StationPriors
@@ -192,6 +193,7 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
     overlap tree), for the weak-link warning; ``diagnostics``: figures of the solve's own
     stages, added to the evaluator's; ``notes``: warnings of the solve's own stages."""
     options = resolution.options
+    scale = options.uncertainty.receiver_scale_sigma or 0.0
     reference = problem.station_ids[0]
     poses = ev.station_poses()
     models = ev.factory.models()
@@ -216,7 +218,7 @@ def _result(angles: Angles, problem: GraphProblem, ev: FactorEvaluator, fit: Opt
     timings["total"] = time.perf_counter() - t0
     return SolveResult(
         method="graph",
-        stations=Stations(reference, out),
+        stations=Stations(reference, out, {RESULT_KEY: scale} if scale > 0 else {}),
         trajectory=Trajectory(problem.state_time, ev.board_poses().copy()),
         residuals=residuals,
         status=fit.status.value,
