@@ -47,12 +47,12 @@ FEW_DIODES = 5
 """The default initialiser's PnP needs this many diodes with both angles per measurement:
 data whose median sweep holds fewer is few-diode."""
 STEP_TOLERANCE_SIGMA = 0.05
+"""The stations' test of the stopping rule where the options leave it unset: LM stops when
+they are estimated within this many standard deviations of convergence."""
 FEW_DIODE_SCALE_SIGMA = 0.006
 """The receiver-scale uncertainty (relative) of few-diode data: the rms of station 1's
 shortfall along the baseline against the mocap-anchored stations on the four shared
 Crazyflie logs (0.68, 0.84, 0.38, 0.40 %; docs/results/anchored_stations.md)."""
-"""The stations' test of the stopping rule where the options leave it unset: LM stops when
-they are estimated within this many standard deviations of convergence."""
 
 
 @dataclass(frozen=True)
