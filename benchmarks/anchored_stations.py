@@ -48,8 +48,8 @@ from lhgraph.estimation.result import SolveResult
 from lhgraph.geometry.transforms import inverse, rotation_angle
 from lhgraph.io.angles import load_angles
 from lhgraph.io.stations import Station, Stations, load_stations, save_stations
+from lhgraph.io.trajectory import Trajectory
 from lhgraph.model.board import load_board
-from lhgraph.model.calibration import load_calibration
 
 LOGS = ("lh1_crossingBeam_move/log02", "lh1_crossingBeam_flight/log00",
         "lh2_crossingBeam_move/log00", "lh2_crossingBeam_move/log01")
@@ -59,46 +59,50 @@ PAIRS = (("lh1_crossingBeam_move/log02", "lh1_crossingBeam_flight/log00"),
 
 @dataclass(frozen=True)
 class Anchored:
-    """One log's stations resected in the Qualisys frame: ``T_mocap_lh`` by station, the
-    marker body's origin ``lever_m`` in the board frame (m), the hits used and their median
-    absolute residual (rad), the mocap's first sample (m)."""
+    """One log's stations resected in the Qualisys frame: ``T_mocap_lh`` by station with the
+    marker body's lever solved (``lever_m``, its origin in the board frame, m), and
+    ``T_mocap_lh_held`` with it held at the deck's centre; the hits used and their median
+    absolute residual (rad, lever solved), the mocap's first sample (m)."""
 
     T_mocap_lh: dict[int, np.ndarray]
+    T_mocap_lh_held: dict[int, np.ndarray]
     lever_m: np.ndarray
     hits: int
     median_residual_rad: float
     first_sample_m: np.ndarray
 
 
-def anchored(work: Path, result: SolveResult, solve_lever: bool = True) -> Anchored:
-    """The imported log ``work``'s stations resected on its mocap path, the marker body's
-    lever solved (or held at the deck's centre); orientations and the alignment from
-    ``result`` (a solve of the log)."""
-    frame = mocap_frame(work, result.stations)
+def anchored(work: Path, stations: Stations, path: Trajectory) -> Anchored:
+    """The imported log ``work``'s stations resected on its mocap path; the alignment from
+    ``stations`` (a solve of the log, with its factory models), the board's orientations from
+    ``path`` (theirs, solved or tracked)."""
+    frame = mocap_frame(work, stations)
     angles = load_angles(work / "angles.csv")
     p = _mocap_at(frame.time, frame.position, angles.time)
     seen = np.all(np.isfinite(p), axis=1)
     a = angles.select(seen)
-    T = frame.T_mocap_world @ result.trajectory.at(a.time)
+    T = frame.T_mocap_world @ path.at(a.time)
     T[:, :3, 3] = p[seen]
-    models = {k: c.model() for k, c in load_calibration(work / "ootx.toml").items()}
-    starts = {k: frame.T_mocap_world @ result.stations.pose(k)
-              for k in result.stations.indices()}
-    r = resect_stations(T, load_board(work / "board.toml").positions[a.sensor], a.lighthouse,
-                        a.axis, a.angle, models, starts, solve_lever=solve_lever)
+    models = {k: stations.stations[k].model for k in stations.indices()}
+    starts = {k: frame.T_mocap_world @ stations.pose(k) for k in stations.indices()}
+    hits = (T, load_board(work / "board.toml").positions[a.sensor], a.lighthouse, a.axis,
+            a.angle, models, starts)
+    solved = resect_stations(*hits, solve_lever=True)
+    held = resect_stations(*hits)
     first = frame.position[np.argmin(frame.time)]
-    return Anchored(r.T_ref_lh, r.lever_m, len(a), r.median_abs_residual_rad, first)
+    return Anchored(solved.T_ref_lh, held.T_ref_lh, solved.lever_m, len(a),
+                    solved.median_abs_residual_rad, first)
 
 
-def save_anchored(work: Path, result: SolveResult) -> tuple[Anchored, Path]:
+def save_anchored(work: Path, stations: Stations, path: Trajectory) -> tuple[Anchored, Path]:
     """The imported log ``work``'s anchored stations (:func:`anchored`, lever solved) and the
-    stations TOML ``work/stations-anchored.toml`` (Qualisys frame, ``result``'s models) they
+    stations TOML ``work/stations-anchored.toml`` (Qualisys frame, ``stations``' models) they
     were written to."""
-    ref = anchored(work, result)
-    path = save_stations(Stations(0, {k: Station(T, model=result.stations.stations[k].model)
-                                      for k, T in ref.T_mocap_lh.items()}),
-                         work / "stations-anchored.toml", overwrite=True)
-    return ref, path
+    ref = anchored(work, stations, path)
+    written = save_stations(Stations(0, {k: Station(T, model=stations.stations[k].model)
+                                         for k, T in ref.T_mocap_lh.items()}),
+                            work / "stations-anchored.toml", overwrite=True)
+    return ref, written
 
 
 def station_1(T: dict[int, np.ndarray]) -> np.ndarray:
@@ -169,13 +173,12 @@ def main(argv: list[str] | None = None) -> int:
                 lines.append(f"| {log} | skipped: data absent |" + " |" * 11)
                 continue
             result = solve_imported(work, GraphOptions())
-            ref = anchored(work, result)
-            held = anchored(work, result, solve_lever=False)
+            ref = anchored(work, result.stations, result.trajectory)
             truth = station_1(ref.T_mocap_lh)
             ours = station_1(geometry(result.stations))
             theirs = station_1(geometry(load_stations(work / "stations-cfclient.toml")))
             ours_by_log[log], anchored_by_log[log] = ours, truth
-            shift = np.linalg.norm(station_1(held.T_mocap_lh)[:3, 3] - truth[:3, 3]) * 1e3
+            shift = np.linalg.norm(station_1(ref.T_mocap_lh_held)[:3, 3] - truth[:3, 3]) * 1e3
             lever = ", ".join(f"{v * 1e3:+.0f}" for v in ref.lever_m)
             heights = " / ".join(f"{T[2, 3] - ref.first_sample_m[2]:.3f}"
                                  for _, T in sorted(ref.T_mocap_lh.items()))

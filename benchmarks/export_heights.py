@@ -35,9 +35,10 @@ import numpy as np
 
 from benchmarks import begin, write_results
 from benchmarks.anchored_stations import save_anchored
-from benchmarks.compare_pairs import CF, DATA, imported_logs, lhgraph, solve_imported
-from lhgraph.estimation.graph.options import GraphOptions
+from benchmarks.compare_pairs import CF, DATA, imported_logs, lhgraph
 from lhgraph.io.cfclient import read_system_config
+from lhgraph.io.stations import load_stations
+from lhgraph.io.trajectory import load_trajectory
 
 LOGS = ("lh1_crossingBeam_move/log02", "lh1_crossingBeam_flight/log00",
         "lh2_crossingBeam_move/log00", "lh2_crossingBeam_move/log01")
@@ -88,11 +89,12 @@ def row(log: str, work: Path) -> str:
                      "--output", str(work / "stations.toml"), "--quiet")
     if solved.returncode not in (0, 3):
         raise SystemExit(f"solve {log}: {solved.stderr.strip()}")
-    ref, anchored_toml = save_anchored(work, solve_imported(work, GraphOptions()))
+    ours = exported(work, work / "stations.toml", "ours")
+    ref, anchored_toml = save_anchored(work, load_stations(work / "stations.toml"),
+                                       load_trajectory(work / "track-ours.csv"))
     truth = {k: T.copy() for k, T in ref.T_mocap_lh.items()}
     for T in truth.values():
         T[2, 3] -= ref.first_sample_m[2]
-    ours = exported(work, work / "stations.toml", "ours")
     levelled = exported(work, work / "stations-cfclient.toml", "cfclient")
     pinned = exported(work, anchored_toml, "anchored")
     cells = [log, heights(theirs.T_world_lh), heights(truth)]

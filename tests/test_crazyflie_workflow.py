@@ -17,10 +17,10 @@ from pathlib import Path
 import pytest
 
 from benchmarks.anchored_stations import save_anchored
-from benchmarks.compare_pairs import solve_imported
 from lhgraph.cli import main
-from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.io.cfclient import read_system_config
+from lhgraph.io.stations import load_stations
+from lhgraph.io.trajectory import load_trajectory
 
 LOGS = {"lh1_move_log02": ("lh1_crossingBeam_move", "log02"),
         "lh1_flight_log00": ("lh1_crossingBeam_flight", "log00"),
@@ -104,7 +104,8 @@ def test_export_is_within_50_mm_of_the_mocap_anchored_stations_exported_alike(wo
     if code != 0:
         pytest.skip("the export was refused (the refusal has its own test)")
     out = workflow["out"]
-    _, stations = save_anchored(out, solve_imported(out, GraphOptions()))
+    _, stations = save_anchored(out, load_stations(out / "stations.toml"),
+                                load_trajectory(out / "track.csv"))
     files = ["--board", str(out / "board.toml"), "--angles", str(out / "angles.csv"),
              "--calibration", str(out / "ootx.toml")]
     assert _run(capsys, "track", *files, "--stations", str(stations),
