@@ -41,6 +41,24 @@ def _run(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, str, str]:
     return code, out.out, out.err
 
 
+def _inputs(out: Path) -> list[str]:
+    """The imported folder ``out``'s board, angles and calibration options."""
+    return ["--board", str(out / "board.toml"), "--angles", str(out / "angles.csv"),
+            "--calibration", str(out / "ootx.toml")]
+
+
+def _track_and_export(capsys: pytest.CaptureFixture, out: Path, stations: Path, track: str,
+                      config: str) -> tuple[tuple[int, str, str], tuple[int, str, str]]:
+    """``stations`` tracked on the imported folder ``out`` (to ``out/track``) and exported
+    for cfclient with its IMU (to ``out/config``), as the README does: what each printed."""
+    tracked = _run(capsys, "track", *_inputs(out), "--stations", str(stations), "--output",
+                   str(out / track))
+    exported = _run(capsys, "export", "cfclient", str(stations), "--calibration",
+                    str(out / "ootx.toml"), "--imu", str(out / "imu.csv"), "--trajectory",
+                    str(out / track), "--output", str(out / config))
+    return tracked, exported
+
+
 @pytest.fixture(scope="module")
 def workflows(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
     return {}
@@ -59,14 +77,9 @@ def workflow(request, workflows, shared_data: Path, tmp_path_factory, capsys) ->
     out = tmp_path_factory.mktemp(name)
     assert _run(capsys, "import", "crazyflie", str(data / log), "--system-config",
                 str(data / "system-config.yaml"), "--output", str(out), "--quiet")[0] == 0
-    files = ["--board", str(out / "board.toml"), "--angles", str(out / "angles.csv"),
-             "--calibration", str(out / "ootx.toml")]
-    solve = _run(capsys, "solve", *files, "--output", str(out / "stations.toml"))
-    track = _run(capsys, "track", *files[:4], "--calibration", str(out / "ootx.toml"),
-                 "--stations", str(out / "stations.toml"), "--output", str(out / "track.csv"))
-    export = _run(capsys, "export", "cfclient", str(out / "stations.toml"), "--calibration",
-                  str(out / "ootx.toml"), "--imu", str(out / "imu.csv"), "--trajectory",
-                  str(out / "track.csv"), "--output", str(out / "system-config.yaml"))
+    solve = _run(capsys, "solve", *_inputs(out), "--output", str(out / "stations.toml"))
+    track, export = _track_and_export(capsys, out, out / "stations.toml", "track.csv",
+                                      "system-config.yaml")
     workflows[name] = {"name": name, "out": out, "data": data, "solve": solve, "track": track,
                        "export": export}
     return workflows[name]
@@ -106,14 +119,9 @@ def test_export_is_within_50_mm_of_the_mocap_anchored_stations_exported_alike(wo
     out = workflow["out"]
     _, stations = save_anchored(out, load_stations(out / "stations.toml"),
                                 load_trajectory(out / "track.csv"))
-    files = ["--board", str(out / "board.toml"), "--angles", str(out / "angles.csv"),
-             "--calibration", str(out / "ootx.toml")]
-    assert _run(capsys, "track", *files, "--stations", str(stations),
-                "--output", str(out / "track-anchored.csv"), "--quiet")[0] in (0, 3)
-    assert _run(capsys, "export", "cfclient", str(stations),
-                "--calibration", str(out / "ootx.toml"), "--imu", str(out / "imu.csv"),
-                "--trajectory", str(out / "track-anchored.csv"), "--output",
-                str(out / "anchored.yaml"))[0] == 0
+    track, export = _track_and_export(capsys, out, stations, "track-anchored.csv",
+                                      "anchored.yaml")
+    assert track[0] in (0, 3) and export[0] == 0
     ours = read_system_config(out / "system-config.yaml").T_world_lh
     truth = read_system_config(out / "anchored.yaml").T_world_lh
     for k, T in ours.items():
