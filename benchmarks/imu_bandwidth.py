@@ -54,11 +54,11 @@ def resampled(t: np.ndarray, x: np.ndarray, grid: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(grid, t, x[:, j]) for j in range(x.shape[1])], axis=1)
 
 
-def compared(work: Path, window_s: float) -> tuple[float, float, float, int]:
-    """On the imported log ``work``: the best correlation of the accelerometer's |f| - g with
-    the mocap's, its delay (s), the slope at that delay, and the moments compared."""
-    m = columns(work / "mocap.csv", ("time", "x", "y", "z"))
-    imu = columns(work / "imu.csv", ("time", "ax", "ay", "az"))
+def compared(m: np.ndarray, imu: np.ndarray, window_s: float
+             ) -> tuple[float, float, float, int]:
+    """For an imported log's mocap ``m`` (time, x, y, z) and accelerometer ``imu`` (time, ax,
+    ay, az): the best correlation of the accelerometer's |f| - g with the mocap's, its delay
+    (s), the slope at that delay, and the moments compared."""
     grid = np.arange(max(m[0, 0], imu[0, 0]) + 1.0, min(m[-1, 0], imu[-1, 0]) - 1.0, STEP_S)
     n = int(round(window_s / STEP_S)) | 1
     acc = savgol_filter(resampled(m[:, 0], m[:, 1:], grid), DIFFERENTIATOR, 3, deriv=2,
@@ -92,9 +92,11 @@ def main(argv: list[str] | None = None) -> int:
             if work is None:
                 lines.append(f"| {log} | skipped: data absent |" + " |" * (len(WINDOWS_S) - 1))
                 continue
+            mocap = columns(work / "mocap.csv", ("time", "x", "y", "z"))
+            imu = columns(work / "imu.csv", ("time", "ax", "ay", "az"))
             cells = []
             for w in WINDOWS_S:
-                c, delay, k, n = compared(work, w)
+                c, delay, k, n = compared(mocap, imu, w)
                 cells.append(f"r {c:.2f}, {delay * 1e3:+.0f} ms, slope {k:.2f} ({n})")
             lines.append(f"| {log} | " + " | ".join(cells) + " |")
             print(lines[-1], flush=True)
