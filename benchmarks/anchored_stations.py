@@ -43,7 +43,7 @@ from benchmarks.crossing_beam_ratios import mocap_frame
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.layout_compare import compare_layouts
 from lhgraph.estimation.receiver_scale import receiver_scale_covariance
-from lhgraph.estimation.resection import resect_stations
+from lhgraph.estimation.resection import Resection, resect_stations, tracked_board_poses
 from lhgraph.estimation.result import SolveResult
 from lhgraph.geometry.transforms import inverse, rotation_angle
 from lhgraph.io.angles import load_angles
@@ -72,8 +72,42 @@ class Anchored:
     first_sample_m: np.ndarray
 
 
-def anchored(work: Path, stations: Stations, path: Trajectory) -> Anchored:
-    """The imported log ``work``'s stations resected on its mocap path; the alignment from
+@dataclass(frozen=True)
+class AnchoringHits:
+    """An imported log's hits where the mocap saw the receiver, ready to resect: the tracked
+    point's poses ``T_mocap_tracked`` (N, 4, 4; the mocap's position, the path's
+    orientation rotated into the Qualisys frame), each hit's diode ``s_board`` (N, 3, board
+    frame, m), its station, axis and angle (rad), the stations' factory models and their
+    starting poses (Qualisys frame), and the mocap's first sample (m); the hits' ``time``
+    (s) and ``sensor`` index."""
+
+    T_mocap_tracked: np.ndarray
+    s_board: np.ndarray
+    station: np.ndarray
+    axis: np.ndarray
+    angle: np.ndarray
+    models: dict
+    starts: dict[int, np.ndarray]
+    first_sample_m: np.ndarray
+    time: np.ndarray
+    sensor: np.ndarray
+
+    def resect(self, select: np.ndarray | slice = slice(None), angle_gain: float = 1.0,
+               solve_lever: bool = False, lever_m: np.ndarray | None = None) -> Resection:
+        """The stations resected from the hits ``select``, their angles divided by
+        ``angle_gain`` (a station that reports angles that much too wide); the lever solved,
+        held at ``lever_m`` (board frame, m) or, neither given, at zero."""
+        T = self.T_mocap_tracked[select]
+        if lever_m is not None:
+            T = tracked_board_poses(T, lever_m)
+        return resect_stations(T, self.s_board[select],
+                               self.station[select], self.axis[select],
+                               self.angle[select] / angle_gain, self.models, self.starts,
+                               solve_lever=solve_lever)
+
+
+def anchoring_hits(work: Path, stations: Stations, path: Trajectory) -> AnchoringHits:
+    """The imported log ``work``'s hits to resect on its mocap path; the alignment from
     ``stations`` (a solve of the log, with its factory models), the board's orientations from
     ``path`` (theirs, solved or tracked)."""
     frame = mocap_frame(work, stations)
@@ -83,15 +117,22 @@ def anchored(work: Path, stations: Stations, path: Trajectory) -> Anchored:
     a = angles.select(seen)
     T = frame.T_mocap_world @ path.at(a.time)
     T[:, :3, 3] = p[seen]
-    models = {k: stations.stations[k].model for k in stations.indices()}
-    starts = {k: frame.T_mocap_world @ stations.pose(k) for k in stations.indices()}
-    hits = (T, load_board(work / "board.toml").positions[a.sensor], a.lighthouse, a.axis,
-            a.angle, models, starts)
-    solved = resect_stations(*hits, solve_lever=True)
-    held = resect_stations(*hits)
-    first = frame.position[np.argmin(frame.time)]
-    return Anchored(solved.T_ref_lh, held.T_ref_lh, solved.lever_m, len(a),
-                    solved.median_abs_residual_rad, first)
+    return AnchoringHits(T, load_board(work / "board.toml").positions[a.sensor], a.lighthouse,
+                         a.axis, a.angle, {k: stations.stations[k].model
+                                           for k in stations.indices()},
+                         {k: frame.T_mocap_world @ stations.pose(k)
+                          for k in stations.indices()},
+                         frame.position[np.argmin(frame.time)], a.time, a.sensor)
+
+
+def anchored(work: Path, stations: Stations, path: Trajectory) -> Anchored:
+    """The imported log ``work``'s stations resected on its mocap path (:func:`anchoring_hits`
+    for the arguments)."""
+    hits = anchoring_hits(work, stations, path)
+    solved = hits.resect(solve_lever=True)
+    held = hits.resect()
+    return Anchored(solved.T_ref_lh, held.T_ref_lh, solved.lever_m, len(hits.angle),
+                    solved.median_abs_residual_rad, hits.first_sample_m)
 
 
 def save_anchored(work: Path, stations: Stations, path: Trajectory) -> tuple[Anchored, Path]:

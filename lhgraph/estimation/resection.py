@@ -88,7 +88,7 @@ def resect_stations(T_ref_tracked: ArrayLike, s_board: ArrayLike, station: Array
     iterations, step = 0, np.full(n, np.inf)
     while iterations < max_iterations and np.linalg.norm(step) >= step_tolerance:
         iterations += 1
-        r, J = _residuals(T, _board_poses(T_t, lever), s, st, ax, measured, models, keys,
+        r, J = _residuals(T, tracked_board_poses(T_t, lever), s, st, ax, measured, models, keys,
                           solve_lever)
         scale = max(cauchy_scale_rad, ANNEALING * float(np.median(np.abs(r))))
         w = 1.0 / (1.0 + (r / scale) ** 2)
@@ -105,11 +105,11 @@ def resect_stations(T_ref_tracked: ArrayLike, s_board: ArrayLike, station: Array
             T[k] = T[k] @ se3_exp(step[6 * i:6 * i + 6])
         if solve_lever:
             lever = lever + step[-3:]
-    r, _ = _residuals(T, _board_poses(T_t, lever), s, st, ax, measured, models, keys, False)
+    r, _ = _residuals(T, tracked_board_poses(T_t, lever), s, st, ax, measured, models, keys, False)
     return Resection(T, lever, r, iterations, bool(np.linalg.norm(step) < step_tolerance))
 
 
-def _board_poses(T_ref_tracked: Array, lever_m: Array) -> Array:
+def tracked_board_poses(T_ref_tracked: Array, lever_m: Array) -> Array:
     """Board poses whose origin lies ``-lever_m`` (board frame) from the tracked point."""
     T = T_ref_tracked.copy()
     T[:, :3, 3] -= T[:, :3, :3] @ lever_m
