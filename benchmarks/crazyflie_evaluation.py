@@ -6,7 +6,7 @@ with an uploaded geometry: at every moment (station 0's fresh pairs), each stati
 azimuth and elevation of each diode are interpolated linearly in time (neighbours within
 ``--max-gap`` on both sides), the two rays of a diode are intersected (midpoint of the
 shortest segment) and the diodes seen by both stations are averaged. Positions are compared
-with the Qualisys marker body as the dataset's authors do: mocap on the log clock by the
+with the Qualisys marker body as the dataset's authors do: mocap on the written clock by the
 marker on/off events (``mocap.csv`` of ``lhgraph import crazyflie``), then a search of
 +-100 ms at both ends (offset and clock rate) for the smallest rigid-fit (Kabsch) residual;
 percentiles of the position error after the best rigid fit.
@@ -34,11 +34,12 @@ to another file.
 A mocap of another recording is refused (one line naming the file, exit code 2), by two
 checks: the importer's clock rate (log seconds per mocap second, from the mocap's first and
 last rows against the log's marker events) must be within 1 +- ``MAX_RATE_ERROR`` (every
-shared log with its own mocap: 0.989; with the mocap of a recording of another length: 0.49
-or 1.98), and, the check that also catches another recording of the same length and the one
-an ``--import-dir`` allows, at least one geometry's positions must follow the mocap: rms
-error after the best rigid fit and time search at most ``MAX_ALIGNED_RMS_M`` (the shared logs
-with their own mocap: 19-36 mm; with another recording's: over 1 m).
+shared log with its own mocap: 1.0000 on the deck's clock; with the mocap of a recording of
+another length: 0.49 or 1.98), and, the check that also catches another recording of the
+same length and the one an ``--import-dir`` allows, at least one geometry's positions must
+follow the mocap: rms error after the best rigid fit and time search at most
+``MAX_ALIGNED_RMS_M`` (the shared logs with their own mocap: 19-36 mm; with another
+recording's: over 1 m).
 """
 
 from __future__ import annotations

@@ -6,8 +6,8 @@ motion it reports, by time scale, and how late.
 Issue #39 item 2 wants the deck's metric scale from its accelerometer; on the shared logs
 the graph's IMU-scaled solves come out 5-10 % small while the mocap says our light-only
 geometry is 0.4-0.8 % small (docs/results/anchored_stations.md). This checks the
-accelerometer itself, without any solve: the log's Qualisys positions (on the log's clock
-through the marker events, as imported) are resampled at 200 Hz and twice differentiated (a
+accelerometer itself, without any solve: the log's Qualisys positions (on the written
+clock through the marker events, as imported) are resampled at 200 Hz and twice differentiated (a
 cubic Savitzky-Golay filter over 45 ms); that and the accelerometer (`imu.csv`, 100 Hz) are
 then smoothed alike, by a cubic Savitzky-Golay filter of window W. Compared is the specific
 force's magnitude less gravity, |f| - g (so neither the receiver's orientation nor the IMU's

@@ -309,12 +309,16 @@ def test_real_import_end_to_end(tmp_path):
     a = load_angles(tmp_path / "angles.csv")
     for bs in (0, 1):
         sel = (a.lighthouse == bs) & (a.axis == 0) & (a.sensor == 0)
-        assert np.median(np.diff(a.time[sel])) == pytest.approx(1 / 30, abs=1e-3)
+        # the stations' 30 Hz on the deck's clock (the log's own says 33.0 ms)
+        assert np.median(np.diff(a.time[sel])) == pytest.approx(1 / 30, abs=1e-4)
     st = load_stations(tmp_path / "stations-cfclient.toml")
     assert st.indices() == [0, 1]
     assert 3.0 < np.linalg.norm(st.pose(0)[:3, 3] - st.pose(1)[:3, 3]) < 5.0
     mocap = read_csv_columns(tmp_path / "mocap.csv", [("time", float), ("x", float)])
-    assert mocap["time"][0] >= r.mocap.time[0] - 1e-6 and abs(r.mocap.rate - 1) < 0.02
+    assert mocap["time"][0] >= r.mocap.time[0] - 1e-6
+    # Qualisys and the deck's clock agree; the log's own runs 1.09 % slow against both
+    assert r.clock.scale == pytest.approx(1.01106, abs=2e-5)
+    assert r.mocap.rate == pytest.approx(1.0, abs=1e-4)
     for name in ("board.toml", "imu.csv", "ootx.toml"):
         assert (tmp_path / name).is_file()
 

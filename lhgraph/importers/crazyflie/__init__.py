@@ -3,8 +3,9 @@ files.
 
 :mod:`~lhgraph.importers.crazyflie.usdlog` reads and writes the log format,
 :mod:`~lhgraph.importers.crazyflie.sweeps` turns its ``lhAngle`` events into angles (the
-repeated pairs dropped), :mod:`~lhgraph.importers.crazyflie.mocap` puts the Qualisys
-recording on the log's clock and :mod:`~lhgraph.importers.crazyflie.convert` writes the
+repeated pairs dropped), :mod:`~lhgraph.importers.crazyflie.clock` measures the log's clock
+against the deck's, :mod:`~lhgraph.importers.crazyflie.mocap` puts the Qualisys recording
+on the written clock and :mod:`~lhgraph.importers.crazyflie.convert` writes the
 files (``lhgraph import crazyflie``; cfclient's system configuration is read by
 :mod:`lhgraph.io.cfclient`). See docs/crazyflie.md.
 """

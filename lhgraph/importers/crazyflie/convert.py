@@ -1,18 +1,21 @@
 """Conversion of a Crazyflie uSD log into lhgraph contract files: :func:`import_crazyflie`
 (the ``lhgraph import crazyflie`` command, docs/crazyflie.md).
 
-Time base of every written file: the log's clock (s since the Crazyflie started).
+Time base of every written file: the deck's pulse clock (s since the Crazyflie started, the
+log's stamps scaled by :func:`~lhgraph.importers.crazyflie.clock.deck_clock`; the log's own
+clock when the log has no raw pulse frames to measure it by).
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from lhgraph.errors import InputError
+from lhgraph.importers.crazyflie.clock import DeckClock, deck_clock
 from lhgraph.importers.crazyflie.mocap import (
     Mocap,
     align_mocap,
@@ -57,17 +60,20 @@ class CrazyflieImport:
     mocap: Mocap | None = None
     skipped: tuple[str, ...] = field(default=())
     imu_dropped: int = 0
+    clock: DeckClock | None = None
 
     def summary(self) -> str:
         """Human-readable lines."""
         lines = [f"uSD log version {self.version}; {SYSTEM_TYPES[self.system_type]}; "
                  f"duration {self.duration_s:.1f} s"]
         lines += [f"log: {n}" for n in self.notes]
+        lines.append(self.clock.line() if self.clock is not None else
+                     "clock: the log's own (no raw pulse frames to check it against)")
         lines += self.sweeps.lines()
         lines.append(f"imu: {self.imu_rate_hz:.1f} Hz; dropped {self.imu_dropped} samples "
                      "(a value not finite, or a stamp not after the one before)")
         if self.mocap is not None:
-            lines.append(f"mocap: {len(self.mocap.time)} samples on the log clock (clock rate "
+            lines.append(f"mocap: {len(self.mocap.time)} samples on the written clock (clock rate "
                          f"{self.mocap.rate:.6f}), {self.mocap.n_unseen} unseen left out")
         lines += [f"not written: {s}" for s in self.skipped]
         lines += [f"wrote {p}" for p in self.paths.values()]
@@ -135,6 +141,9 @@ def import_crazyflie(log_path: str | Path, out_dir: str | Path,
     names += ["mocap.csv"] if mocap is not None else []
     paths = {name.rsplit(".", 1)[0]: out / name for name in names}
     log = read_usd_log(log_path)
+    clock = deck_clock(log)
+    if clock is not None and clock.plausible:
+        log = replace(log, clock_scale=clock.scale)
     generation = system_type(log, log_path)
     if config is not None and config.system_type != generation:
         raise InputError(f"the system configuration is {SYSTEM_TYPES[config.system_type]} "
@@ -178,4 +187,5 @@ def import_crazyflie(log_path: str | Path, out_dir: str | Path,
         skipped.append("mocap.csv (no mocapNN.npy beside the log, no --mocap)")
     return CrazyflieImport(paths, log.version, log.notes, sweeps,
                            float(angles.time[-1] - angles.time[0]) if len(angles) else 0.0,
-                           float(imu_rate), generation, aligned, tuple(skipped), imu_dropped)
+                           float(imu_rate), generation, aligned, tuple(skipped), imu_dropped,
+                           clock)

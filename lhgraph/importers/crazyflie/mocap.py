@@ -1,4 +1,5 @@
-"""The dataset's Qualisys recording (``mocapNN.npy``) on the log's clock.
+"""The dataset's Qualisys recording (``mocapNN.npy``) on the log's clock (its stamps as the
+log gives them: scaled to the deck's clock by the importer).
 
 ``mocapNN.npy``: ``float64 (N, 4)``, Qualisys time (ms), x, y, z (m) of the marker body, NaN
 where unseen; its first and last rows are the moments the active markers were switched on

@@ -55,17 +55,22 @@ class EventType:
 class UsdLog:
     """A decoded log: ``events[name]`` is a structured array (fields ``timestamp`` in ticks
     and the variables), ``order`` the type id of every kept event in file order, ``notes``
-    what the reader dropped (empty for an intact log)."""
+    what the reader dropped (empty for an intact log), ``clock_scale`` the seconds of a
+    reference clock per second of the log's (1: the log's own;
+    :func:`lhgraph.importers.crazyflie.clock.deck_clock` measures it)."""
 
     version: int
     types: tuple[EventType, ...]
     events: dict[str, NDArray]
     order: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     notes: tuple[str, ...] = ()
+    clock_scale: float = 1.0
 
     def time_s(self, name: str) -> NDArray[np.float64]:
-        """Timestamps (s, the log's clock) of the events called ``name``."""
-        return self.events[name]["timestamp"].astype(float) * TIMESTAMP_UNIT_S[self.version]
+        """Timestamps (s, the log's clock times ``clock_scale``) of the events called
+        ``name``."""
+        return (self.events[name]["timestamp"].astype(float)
+                * (TIMESTAMP_UNIT_S[self.version] * self.clock_scale))
 
     def count(self, name: str) -> int:
         """Number of events called ``name`` (0 if the type is absent)."""
