@@ -4,7 +4,7 @@ motion it reports, by time scale, and how late.
     python -m benchmarks imu_bandwidth [--output FILE] [--force]
 
 Issue #39 item 2 wants the deck's metric scale from its accelerometer; on the shared logs
-the graph's IMU-scaled solves come out 5-10 % small while the mocap says our light-only
+the graph's IMU-scaled solves come out 3-8 % small while the mocap says our light-only
 geometry is 0.4-0.8 % small (docs/results/anchored_stations.md). This checks the
 accelerometer itself, without any solve: the log's Qualisys positions (on the written
 clock through the marker events, as imported) are resampled at 200 Hz and twice differentiated (a

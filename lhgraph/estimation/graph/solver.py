@@ -142,7 +142,7 @@ def solve_graph(board: Board, angles: Angles, models: dict[int, StationModel] | 
 
 SCALE_WARN = 3.0
 """A solved board scale further than this many prior spreads from the board file's is a
-warning (the real Crazyflie logs: -5 to -10 % against the mocap's +0.04 to +0.9 %)."""
+warning (the real Crazyflie logs: -3 to -8 % against the mocap's +0.04 to +0.9 %)."""
 PRIOR_CHI2_WARN = 22.46
 """A station's prior chi2 (6 dof, in the prior's honest covariance) above this (the 99.9 %
 point) is a warning: the capture puts it where the earlier result says it is not."""
