@@ -37,10 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import begin, write_results
-from benchmarks.compare_pairs import DEG, imported_logs, solve_imported
+from benchmarks.compare_pairs import DEG, solved_logs
 from benchmarks.crazyflie_evaluation import _mocap_at
 from benchmarks.crossing_beam_ratios import mocap_frame
-from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.layout_compare import compare_layouts
 from lhgraph.estimation.receiver_scale import receiver_scale_covariance
 from lhgraph.estimation.resection import Resection, resect_stations, tracked_board_poses
@@ -209,11 +208,10 @@ def main(argv: list[str] | None = None) -> int:
     ours_by_log: dict[str, np.ndarray] = {}
     anchored_by_log: dict[str, np.ndarray] = {}
     with tempfile.TemporaryDirectory(prefix="lhgraph-anchored-") as tmp:
-        for log, work in imported_logs(LOGS, Path(tmp)):
-            if work is None:
+        for log, work, result in solved_logs(LOGS, Path(tmp)):
+            if work is None or result is None:
                 lines.append(f"| {log} | skipped: data absent |" + " |" * 11)
                 continue
-            result = solve_imported(work, GraphOptions())
             ref = anchored(work, result.stations, result.trajectory)
             truth = station_1(ref.T_mocap_lh)
             ours = station_1(geometry(result.stations))

@@ -68,6 +68,14 @@ def imported_logs(logs: tuple[str, ...], work: Path) -> Iterator[tuple[str, Path
         yield log, imported("crazyflie", source, work / f"log{i}") if source.exists() else None
 
 
+def solved_logs(logs: tuple[str, ...], work: Path
+                ) -> Iterator[tuple[str, Path | None, SolveResult | None]]:
+    """:func:`imported_logs` each solved by the default graph (:func:`solve_imported`):
+    ``(log, folder, result)``, both None when the log is absent."""
+    for log, folder in imported_logs(logs, work):
+        yield log, folder, None if folder is None else solve_imported(folder, GraphOptions())
+
+
 def solve_imported(work: Path, options: GraphOptions) -> SolveResult:
     """Solve an imported log folder ``work`` with its factory calibration through the Python
     API (the default graph method under ``options``)."""

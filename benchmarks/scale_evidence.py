@@ -55,7 +55,7 @@ from benchmarks.anchored_stations import (
     geometry,
     station_1,
 )
-from benchmarks.compare_pairs import DEG, imported_logs, solve_imported
+from benchmarks.compare_pairs import DEG, solve_imported, solved_logs
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.layout_compare import compare_layouts
 from lhgraph.estimation.resection import tracked_board_poses
@@ -206,11 +206,10 @@ def main(argv: list[str] | None = None) -> int:
     ratio_rows, size_rows, gain_rows, spread_rows, tried_rows = [], [], [], [], []
     tried: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     with tempfile.TemporaryDirectory(prefix="lhgraph-scale-") as tmp:
-        for log, work in imported_logs(LOGS, Path(tmp)):
-            if work is None:
+        for log, work, result in solved_logs(LOGS, Path(tmp)):
+            if work is None or result is None:
                 ratio_rows.append(f"| {log} | skipped: data absent |" + " |" * 3)
                 continue
-            result = solve_imported(work, GraphOptions())
             hits = anchoring_hits(work, result.stations, result.trajectory)
             solved = hits.resect(solve_lever=True)
             lever, T_ref = solved.lever_m, solved.T_ref_lh
