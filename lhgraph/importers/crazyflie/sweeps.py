@@ -115,8 +115,8 @@ def _summary(a: NDArray, station: NDArray, repeat: NDArray, valid: NDArray) -> S
 def lh1_angles(log: UsdLog) -> tuple[Angles, SweepSummary]:
     """The angles table of an LH1 log: station = the log's base-station index, axis = its
     sweep (0 horizontal = azimuth, 1 vertical = elevation), ``angle`` as measured; extra
-    columns ``corrected_angle`` (the firmware's) and ``log_time`` (s, the event's stamp).
-    Repeats and invalid hits (:func:`valid_hits`) are dropped and counted."""
+    columns ``corrected_angle`` (the firmware's) and ``log_time`` (s, the event's stamp on
+    ``log``'s clock). Repeats and invalid hits (:func:`valid_hits`) are dropped and counted."""
     a, t = _angle_events(log)
     repeat = repeated_hits(log)
     valid = valid_hits(a)
