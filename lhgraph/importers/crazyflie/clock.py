@@ -73,7 +73,6 @@ def deck_clock(log: UsdLog) -> DeckClock | None:
     run = np.r_[0, np.cumsum(np.diff(t) > MAX_GAP_S)]
     counter = np.r_[0, np.cumsum(step)].astype(float)
     keep = np.ones(len(t), dtype=bool)
-    rate = FPGA_HZ
     for _ in range(5):
         tc, kc = _centred(t, run, keep), _centred(counter, run, keep)
         denominator = float(tc[keep] @ tc[keep])
