@@ -58,7 +58,7 @@ from benchmarks.anchored_stations import (
 from benchmarks.compare_pairs import DEG, solve_imported, solved_logs
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.layout_compare import compare_layouts
-from lhgraph.estimation.resection import tracked_board_poses
+from lhgraph.estimation.resection import Resection, tracked_board_poses
 from lhgraph.estimation.result import SolveResult
 from lhgraph.geometry.transforms import rotation_angle
 from lhgraph.io.angles import load_angles, save_angles
@@ -121,27 +121,25 @@ def robust_slope(measured: np.ndarray, predicted: np.ndarray) -> tuple[float, fl
     return k, float(np.std(ks, ddof=1) / np.sqrt(len(ks)))
 
 
-def apparent_size(hits: AnchoringHits, lever_m: np.ndarray, T_mocap_lh: dict[int, np.ndarray],
-                  result: SolveResult) -> dict[tuple[str, int], tuple[float, float]]:
+def apparent_size(hits: AnchoringHits, solved: Resection, result: SolveResult
+                  ) -> dict[tuple[str, int], tuple[float, float]]:
     """:func:`robust_slope` of the measured angle differences on the predicted ones, by
-    ``("mocap" | "ours", station)``."""
-    T_mocap = tracked_board_poses(hits.T_mocap_tracked, lever_m)
+    ``("mocap" | "ours", station)``: the mocap's predictions are the anchored resection's
+    (``solved``, of all of ``hits``: its residuals plus the measured angles), ours from the
+    result's stations and path."""
     T_ours = result.trajectory.at(hits.time)
-    predicted = {"mocap": np.empty(len(hits.angle)), "ours": np.empty(len(hits.angle))}
-    for k in sorted(T_mocap_lh):
-        for axis in (0, 1):
-            m = (hits.station == k) & (hits.axis == axis)
-            model = hits.models[k]
-            predicted["mocap"][m] = predict(T_mocap_lh[k], T_mocap[m], hits.s_board[m], axis,
-                                            model)
-            predicted["ours"][m] = predict(result.stations.pose(k), T_ours[m],
-                                           hits.s_board[m], axis, model)
+    ours = np.empty(len(hits.angle))
+    for k in hits.models:
+        m = hits.station == k
+        ours[m] = predict(result.stations.pose(k), T_ours[m], hits.s_board[m], hits.axis[m],
+                          hits.models[k])
+    predicted = {"mocap": solved.residual_rad + hits.angle, "ours": ours}
     pairs = sweep_pairs(hits)
     measured = hits.angle[pairs[:, 1]] - hits.angle[pairs[:, 0]]
     out = {}
     for name, pred in predicted.items():
         diff = pred[pairs[:, 1]] - pred[pairs[:, 0]]
-        for k in sorted(T_mocap_lh):
+        for k in sorted(hits.models):
             sel = hits.station[pairs[:, 0]] == k
             out[(name, k)] = robust_slope(measured[sel], diff[sel])
     return out
@@ -150,10 +148,10 @@ def apparent_size(hits: AnchoringHits, lever_m: np.ndarray, T_mocap_lh: dict[int
 def best_gains(hits: AnchoringHits, lever_m: np.ndarray) -> dict[int, float]:
     """Each station's angle gain that fits the anchored resection best (:data:`GAINS`,
     parabola through the least cost and its neighbours; at the grid's end, the end)."""
-    scale = 3 * hits.resect(lever_m=lever_m).median_abs_residual_rad
+    residuals = [hits.resect(angle_gain=g, lever_m=lever_m).residual_rad for g in GAINS]
+    scale = 3 * float(np.median(np.abs(residuals[GAINS.tolist().index(1.0)])))
     costs = {k: [] for k in hits.models}
-    for g in GAINS:
-        r = hits.resect(angle_gain=g, lever_m=lever_m).residual_rad
+    for r in residuals:
         for k in costs:
             costs[k].append(float(np.sum(np.log1p((r[hits.station == k] / scale) ** 2))))
     best = {}
@@ -216,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
             r = ratios(hits, lever, T_ref, result)
             ratio_rows.append(f"| {log} | " + " | ".join(f"{v:.4f}" for v in r) + " |")
             print(ratio_rows[-1], flush=True)
-            size = apparent_size(hits, lever, T_ref, result)
+            size = apparent_size(hits, solved, result)
             size_rows.append(f"| {log} | " + " | ".join(
                 f"{size[(n, k)][0]:.4f} ± {size[(n, k)][1]:.4f}"
                 for n in ("mocap", "ours") for k in sorted(T_ref)) + " |")
