@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="lhgraph-psd-") as tmp:
         for log, work, result in solved_logs(LOGS, Path(tmp)):
             if work is None or result is None:
-                lines.append(f"| {log} | skipped: data absent |" + " |" * (3 + len(options)))
+                lines.append(f"| {log} | skipped: data absent |" + " |" * (1 + len(options)))
                 continue
             ref = station_1(anchored(work, result.stations, result.trajectory).T_mocap_lh)
             row = [log, f"{np.linalg.norm(ref[:3, 3]):.4f}", adapted_psd(result)]
@@ -106,8 +106,9 @@ def main(argv: list[str] | None = None) -> int:
                 psds.append(adapted_psd(solved[0]) + ", " + adapted_psd(solved[1]))
                 cols.append(cell(*(station_1(geometry(s.stations)) for s in solved)))
             lines.append(f"| {HIVE_BAGS[0]} / {HIVE_BAGS[1]} | " + " | ".join(cols) + " |")
+            motion = GraphOptions().motion
             lines += ["", f"hive's adapted psd_pos: {psds[0]} (the floor, `min_psd_factor` "
-                      "times the default)."]
+                      f"times the default: {motion.min_psd_factor * motion.accel_psd_pos:g})."]
         else:
             lines.append("| hive data8.11 / data8.17 | skipped: data absent |"
                          + " |" * (len(options) - 1))
