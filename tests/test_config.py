@@ -59,7 +59,7 @@ def test_graph_options_flat_or_by_group(tmp_path: Path) -> None:
         load_options(GraphOptions, {"optimizer": {"loss": "huber"}}, "x.toml", "graph")
     with pytest.raises(InputError, match="no graph option 'max_iteration'"):
         GraphOptions.of(max_iteration=3)
-    assert GraphOptions().flat()["max_iterations"] == 60 and len(GraphOptions().flat()) == 55
+    assert GraphOptions().flat()["max_iterations"] == 60 and len(GraphOptions().flat()) == 56
 
 
 def test_python_construction_validated() -> None:

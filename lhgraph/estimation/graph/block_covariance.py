@@ -17,11 +17,18 @@ stations' estimate moves with the part of the path it was seen from:
 3. each row's influence on the stations' estimate, ``(A Y)_r b_r``, summed over the rows of
    each time block of the capture (the rows of a board state's factors belong to its block,
    the priors of variables of no state to none): the block scores ``g_c``;
-4. ``sandwich = C / (C - 1) sum_c (g_c - mean g)(g_c - mean g)^T`` over the ``C`` blocks
-   (:func:`block_sandwich`), plus, for the rows of an earlier result's station priors
-   (``lhgraph solve --prior``: information from outside this capture, weighed by its white
-   covariance), their expected share ``(A Y)_p^T C_p (A Y)_p`` with ``C_p`` the covariance
-   of the whitened prior residual its honest covariance implies;
+4. by default (``block_estimator = "jackknife"``) each score is first scaled up by its
+   block's leverage, ``g_c <- (I - L_c)^-1 g_c`` with ``L_c = M_c W^-1``, ``M_c`` the sum
+   over the block's rows of ``(A Y)_r^T (A Y)_r`` and ``W`` the white covariance: the
+   change of the estimate when the block is left out (the stations' problem with the path
+   partialled out; the CV3 estimator of cluster-robust inference, which does not read low
+   by the block's share of the information as the plain one does);
+   ``sandwich = (C - 1) / C sum_c (g_c - mean g)(g_c - mean g)^T`` over the ``C`` blocks
+   (plain: the unscaled scores, ``C / (C - 1)``; :func:`block_sandwich`), plus, for the
+   rows of an earlier result's station priors (``lhgraph solve --prior``: information from
+   outside this capture, weighed by its white covariance), their expected share
+   ``(A Y)_p^T C_p (A Y)_p`` with ``C_p`` the covariance of the whitened prior residual its
+   honest covariance implies;
 5. the *honest* covariance is the sandwich, never narrower than the white one in any
    direction (:func:`floor_at`): with white residuals the two agree up to the sandwich's own
    scatter, with correlated ones the sandwich is the wider;
@@ -80,10 +87,17 @@ class StationCovariances:
         return {"covariance_block_s": self.block_s, "covariance_blocks": float(self.n_blocks)}
 
 
+MAX_BLOCK_LEVERAGE = 0.9
+"""The largest share of the information in one direction a block's jackknife scaling counts
+(its score scaled at most ``1 / (1 - 0.9)`` = 10x): a block that alone determines a
+direction (a station seen in it only) has no leave-it-out estimate."""
+
+
 def block_sandwich(A: sp.csr_matrix, b: Array, row_block: NDArray[np.int64],
                    columns: NDArray[np.int64], order: NDArray[np.int64] | None = None,
                    expected: NDArray[np.bool_] | None = None,
-                   expected_cov: Array | None = None) -> tuple[Array, Array, int]:
+                   expected_cov: Array | None = None,
+                   estimator: str = "jackknife") -> tuple[Array, Array, int]:
     """The white covariance ``[H^-1]`` and the block sandwich of the parameters ``columns``
     of the least-squares problem ``A x ~ b`` (whitened), and the number of blocks.
 
@@ -91,11 +105,13 @@ def block_sandwich(A: sp.csr_matrix, b: Array, row_block: NDArray[np.int64],
     permutation that factorises ``H = A^T A`` with little fill (default: as given);
     ``expected``: rows (of no block) whose share is added at its model's value,
     ``(A Y)_e^T C (A Y)_e`` with ``C`` = ``expected_cov`` (the covariance of those whitened
-    rows; default the identity), instead of from their residuals."""
+    rows; default the identity), instead of from their residuals; ``estimator``:
+    ``"jackknife"`` (each block's score scaled by its leverage, :func:`jackknife_scores`)
+    or ``"plain"``."""
     E = np.zeros((A.shape[1], len(columns)))
     E[columns, np.arange(len(columns))] = 1.0
     Y = normal_solver(A, order)(E)
-    white = Y[columns]
+    white = 0.5 * (Y[columns] + Y[columns].T)
     used = np.flatnonzero(row_block >= 0)
     blocks, which = np.unique(row_block[used], return_inverse=True)
     n = len(blocks)
@@ -103,13 +119,43 @@ def block_sandwich(A: sp.csr_matrix, b: Array, row_block: NDArray[np.int64],
     # sparse gradient row per block times Y, not a dense row of A Y per row of A
     gradients = sp.csr_matrix((b[used], (which, used)), shape=(n, A.shape[0])) @ A
     scores = np.asarray(gradients @ Y)
+    if estimator == "jackknife":
+        scores = jackknife_scores(scores, A[used], which, Y, white)
+        factor = (n - 1) / n
+    else:
+        factor = n / max(n - 1, 1)
     scores -= scores.mean(axis=0)
-    sandwich = scores.T @ scores * (n / max(n - 1, 1))
+    sandwich = scores.T @ scores * factor
     if expected is not None and np.any(expected):
         AY = A[np.flatnonzero(expected)] @ Y
         C = np.eye(len(AY)) if expected_cov is None else expected_cov
         sandwich = sandwich + AY.T @ C @ AY
-    return 0.5 * (white + white.T), sandwich, n
+    return white, sandwich, n
+
+
+def jackknife_scores(scores: Array, A: sp.csr_matrix, which: NDArray[np.int64], Y: Array,
+                     white: Array) -> Array:
+    """Block scores ``scores`` (C, k: each block's influence on the parameters) scaled to
+    the change of the estimate when the block is left out: ``(I - L_c)^-1 g_c``, ``L_c =
+    M_c W^-1`` with ``M_c = (A_c Y)^T (A_c Y)`` over the block's rows ``A_c`` of ``A``
+    (``which``: each row's block) and ``W`` = ``white``. Computed in ``W``'s whitened
+    coordinates (directions of ``W`` below 1e-12 of its largest left as they are), each
+    block's leverage capped at :data:`MAX_BLOCK_LEVERAGE`."""
+    w, V = np.linalg.eigh(white)
+    keep = w > w.max() * 1e-12
+    R = V[:, keep] / np.sqrt(w[keep])  # x -> R^T x whitens
+    root = V[:, keep] * np.sqrt(w[keep])  # and root @ back
+    order = np.argsort(which, kind="stable")
+    starts = np.searchsorted(which[order], np.arange(len(scores) + 1))
+    out = scores.copy()
+    for c in range(len(scores)):
+        rows = order[starts[c]:starts[c + 1]]
+        AYR = np.asarray(A[rows] @ Y) @ R
+        lev, U = np.linalg.eigh(AYR.T @ AYR)
+        s = R.T @ scores[c]
+        scaled = U @ ((U.T @ s) / (1.0 - np.clip(lev, 0.0, MAX_BLOCK_LEVERAGE)))
+        out[c] = scores[c] + root @ (scaled - s)
+    return out
 
 
 def floor_at(floor: Array, C: Array) -> Array:
@@ -176,7 +222,7 @@ def station_covariances_only(fit: OptimizerResult, ev: FactorEvaluator,
     wanted = np.concatenate([columns] + ([system.columns(extra)] if extra else []))
     _, sandwich, n = block_sandwich(system.A, system.b, block.astype(np.int64), wanted,
                                     system.elimination_columns(ev.layout), prior_rows,
-                                    expected_cov)
+                                    expected_cov, options.block_estimator)
     if n < 2:
         return StationCovariances(white, dict(white), "white", block_s, n, None, extra_white,
                                   extra_white)

@@ -32,6 +32,7 @@ PRIOR_ESTIMATES = ("auto", "chi2", "redundancy")
 ACCEL_ESTIMATES = ("auto", "stream", "redundancy")
 IMU_FACTORS = ("auto", "combined", "twist")
 COVARIANCES = ("blocks", "white")
+BLOCK_ESTIMATORS = ("jackknife", "plain")
 
 
 @dataclass(frozen=True)
@@ -290,7 +291,11 @@ class UncertaintyOptions:
     one: it covers the residuals' correlation in time, docs/uncertainty.md) or ``"white"``
     (the graph's marginals, which hold for independent residuals only); the white one is
     kept beside it either way. ``covariance_blocks``: the capture is cut into this many
-    time blocks, each at least ``min_block_s`` long. ``factory_information``: also how well
+    time blocks, each at least ``min_block_s`` long. ``block_estimator``: ``"jackknife"``
+    (each block's score scaled up by its own leverage, the leave-one-block-out estimate's
+    change: the plain sandwich reads low by about the share of the information a block
+    holds, most where a few blocks hold much of it) or ``"plain"`` (the scores as they are,
+    ``C / (C - 1)``). ``factory_information``: also how well
     the capture determines each station's factory terms at the result
     (:mod:`lhgraph.estimation.graph.factory_information`; the result's
     ``factory_information``). ``receiver_scale_sigma``: the receiver's scale uncertainty
@@ -303,6 +308,7 @@ class UncertaintyOptions:
     covariance: str = option("blocks", choices=COVARIANCES)
     covariance_blocks: int = option(30, ge=2, le=10000)
     min_block_s: float = option(0.5, gt=0)
+    block_estimator: str = option("jackknife", choices=BLOCK_ESTIMATORS)
     factory_information: bool = option(False)
     receiver_scale_sigma: float | None = option(None, kind=float, ge=0, lt=0.5)
 
