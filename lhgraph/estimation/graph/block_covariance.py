@@ -120,8 +120,8 @@ def block_sandwich(A: sp.csr_matrix, b: Array, row_block: NDArray[np.int64],
     gradients = sp.csr_matrix((b[used], (which, used)), shape=(n, A.shape[0])) @ A
     scores = np.asarray(gradients @ Y)
     if estimator == "jackknife":
-        scores = jackknife_scores(scores, A[used], which, Y, white)
-        factor = (n - 1) / n
+        scores = jackknife_scores(scores, A, used, which, Y, white)
+        factor = (n - 1) / max(n, 1)
     else:
         factor = n / max(n - 1, 1)
     scores -= scores.mean(axis=0)
@@ -133,12 +133,12 @@ def block_sandwich(A: sp.csr_matrix, b: Array, row_block: NDArray[np.int64],
     return white, sandwich, n
 
 
-def jackknife_scores(scores: Array, A: sp.csr_matrix, which: NDArray[np.int64], Y: Array,
-                     white: Array) -> Array:
+def jackknife_scores(scores: Array, A: sp.csr_matrix, used: NDArray[np.int64],
+                     which: NDArray[np.int64], Y: Array, white: Array) -> Array:
     """Block scores ``scores`` (C, k: each block's influence on the parameters) scaled to
     the change of the estimate when the block is left out: ``(I - L_c)^-1 g_c``, ``L_c =
     M_c W^-1`` with ``M_c = (A_c Y)^T (A_c Y)`` over the block's rows ``A_c`` of ``A``
-    (``which``: each row's block) and ``W`` = ``white``. Computed in ``W``'s whitened
+    (rows ``used``, ``which``: each one's block) and ``W`` = ``white``. Computed in ``W``'s whitened
     coordinates (directions of ``W`` below 1e-12 of its largest left as they are), each
     block's leverage capped at :data:`MAX_BLOCK_LEVERAGE`."""
     w, V = np.linalg.eigh(white)
@@ -149,7 +149,7 @@ def jackknife_scores(scores: Array, A: sp.csr_matrix, which: NDArray[np.int64], 
     starts = np.searchsorted(which[order], np.arange(len(scores) + 1))
     out = scores.copy()
     for c in range(len(scores)):
-        rows = order[starts[c]:starts[c + 1]]
+        rows = used[order[starts[c]:starts[c + 1]]]
         AYR = np.asarray(A[rows] @ Y) @ R
         lev, U = np.linalg.eigh(AYR.T @ AYR)
         s = R.T @ scores[c]
