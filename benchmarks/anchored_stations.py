@@ -61,7 +61,8 @@ class Anchored:
     """One log's stations resected in the Qualisys frame: ``T_mocap_lh`` by station with the
     marker body's lever solved (``lever_m``, its origin in the board frame, m), and
     ``T_mocap_lh_held`` with it held at the deck's centre; the hits used and their median
-    absolute residual (rad, lever solved), the mocap's first sample (m)."""
+    absolute residual (rad, lever solved), also by ``(station, axis)``; the mocap's first
+    sample (m)."""
 
     T_mocap_lh: dict[int, np.ndarray]
     T_mocap_lh_held: dict[int, np.ndarray]
@@ -69,6 +70,7 @@ class Anchored:
     hits: int
     median_residual_rad: float
     first_sample_m: np.ndarray
+    median_residual_by_axis_rad: dict[tuple[int, int], float]
 
 
 @dataclass(frozen=True)
@@ -130,8 +132,11 @@ def anchored(work: Path, stations: Stations, path: Trajectory) -> Anchored:
     hits = anchoring_hits(work, stations, path)
     solved = hits.resect(solve_lever=True)
     held = hits.resect()
+    by_axis = {(int(k), int(a)): float(np.median(np.abs(
+        solved.residual_rad[(hits.station == k) & (hits.axis == a)])))
+        for k, a in sorted(set(zip(hits.station.tolist(), hits.axis.tolist(), strict=True)))}
     return Anchored(solved.T_ref_lh, held.T_ref_lh, solved.lever_m, len(hits.angle),
-                    solved.median_abs_residual_rad, hits.first_sample_m)
+                    solved.median_abs_residual_rad, hits.first_sample_m, by_axis)
 
 
 def save_anchored(work: Path, stations: Stations, path: Trajectory) -> tuple[Anchored, Path]:

@@ -27,6 +27,7 @@ from benchmarks.crazyflie_evaluation import crossing_points, ray_directions
 from lhgraph.importers.crazyflie import read_usd_log
 from lhgraph.importers.crazyflie.sweeps import repeated_hits
 from lhgraph.io.cfclient import read_system_config
+from lhgraph.model.bitcraze import firmware_equivalent
 from lhgraph.model.boards import crazyflie_deck
 from lhgraph.model.station import FactoryCalibration, StationModel, ideal_from_measured
 
@@ -110,7 +111,10 @@ def main(argv: list[str] | None = None) -> int:
         m = table[fresh, bs].transpose(0, 2, 1).reshape(-1, 2)
         c = corr[fresh, bs].transpose(0, 2, 1).reshape(-1, 2)
         ok = np.all(np.isfinite(m), axis=1)
-        for name, cal in (("bitcraze -> ours", config.calibrations[bs].calibration),
+        broadcast = config.calibrations[bs].calibration
+        for name, cal in (("bitcraze -> ours, firmware's curve",
+                           firmware_equivalent(broadcast)),
+                          ("bitcraze -> ours, broadcast curve (default)", broadcast),
                           ("identity (none)", FactoryCalibration())):
             az, el = ideal_from_measured(m[ok, 0], m[ok, 1], StationModel(cal))
             for ax, v in ((0, az), (1, el)):

@@ -27,7 +27,11 @@ from lhgraph.importers.crazyflie.sweeps import lh1_angles
 from lhgraph.io.angles import load_angles
 from lhgraph.io.files import read_csv_columns
 from lhgraph.io.stations import load_stations
-from lhgraph.model.bitcraze import calibration_from_bitcraze, calibration_to_bitcraze
+from lhgraph.model.bitcraze import (
+    calibration_from_bitcraze,
+    calibration_to_bitcraze,
+    firmware_equivalent,
+)
 from lhgraph.model.board import load_board
 from lhgraph.model.boards import crazyflie_deck
 from lhgraph.model.station import FactoryCalibration, StationModel, ideal_from_measured
@@ -293,10 +297,16 @@ def test_mapping_reproduces_corrected_angle():
         keys = sorted(set(pairs[0]) & set(pairs[1]))
         m = np.array([[pairs[0][k][0], pairs[1][k][0]] for k in keys])
         c = np.array([[pairs[0][k][1], pairs[1][k][1]] for k in keys])
-        model = StationModel(config.calibrations[bs].calibration)
-        az, el = ideal_from_measured(m[:, 0], m[:, 1], model)
-        res = np.abs(np.c_[az, el] - c)
-        assert np.median(res) < 2e-5
+        broadcast = config.calibrations[bs].calibration
+        az, el = ideal_from_measured(m[:, 0], m[:, 1],
+                                     StationModel(firmware_equivalent(broadcast)))
+        assert np.median(np.abs(np.c_[az, el] - c)) < 2e-5
+        # the default (broadcast) curve sign is not the firmware's: the two corrections
+        # differ by twice the curve term, largest where the other angle is
+        az, el = ideal_from_measured(m[:, 0], m[:, 1], StationModel(broadcast))
+        curve = -2 * broadcast.curve[None, :] * np.c_[c[:, 1], c[:, 0]] ** 2
+        assert np.median(np.abs(np.c_[az, el] - c - curve)) < 2e-5
+        assert np.percentile(np.abs(curve), 99) > 5e-4
         identity = ideal_from_measured(m[:, 0], m[:, 1], StationModel(FactoryCalibration()))
         assert np.median(np.abs(np.c_[identity[0], identity[1]] - c)) > 1e-2
 
