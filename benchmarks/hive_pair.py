@@ -57,12 +57,13 @@ VARIANTS = {"tracker's sensor positions solved (sensor_offset_sigma_m = 1 mm)":
 """Other graph options tried on the corrected import (pair rows only)."""
 
 
-def tracked_error(folder: Path, stations: Stations) -> str:
-    """The imported bag ``folder``'s angles tracked through ``stations``, aligned to its
-    OptiTrack: the position (mm) and rotation (deg) error, rms and median, as a table cell
-    (the median because the OptiTrack path of data8.17 jumps by 15-30 deg in 10 ms a few
-    times, which dominates its rms)."""
-    models = models_of(load_calibration(folder / "ootx.toml"))
+def tracked_error(folder: Path, stations: Stations, calibration: Path | None = None) -> str:
+    """The imported bag ``folder``'s angles tracked through ``stations`` (the factory models
+    of ``calibration``, default the bag's ``ootx.toml``), aligned to its OptiTrack: the
+    position (mm) and rotation (deg) error, rms and median, as a table cell (the median
+    because the OptiTrack path of data8.17 jumps by 15-30 deg in 10 ms a few times, which
+    dominates its rms)."""
+    models = models_of(load_calibration(calibration or folder / "ootx.toml"))
     path = track(load_board(folder / "board.toml"), load_angles(folder / "angles.csv"),
                  stations, models).path.trajectory
     aligned = align_to_mocap(path, load_trajectory(folder / "mocap.csv"))

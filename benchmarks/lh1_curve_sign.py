@@ -1,5 +1,5 @@
-"""The LH1 factory terms' signs on the Bitcraze logs: the deck firmware's against the
-broadcast values in the convention that fits libsurvive's and hive's recordings.
+"""The LH1 factory terms' signs judged by a mocap: on the Bitcraze logs the deck firmware's
+against the broadcast values in our convention, and on hive's bags.
 
     python -m benchmarks lh1_curve_sign [--output FILE] [--force]
 
@@ -21,9 +21,14 @@ Each solve is then judged against the log's Qualisys recording
 median residual per station and axis (a model nearer the truth leaves less), station 1's
 distance from station 0 (anchored and ours), ours - anchored (position, along the
 baseline, rotation); the solve's own light-only cost and median residual; and the two logs'
-station 1 against each other (the pair of unmoved stations). Writes
-docs/results/lh1_curve_sign.md. Data: Crazyflie (no licence: read from ../shared only).
-~3 min.
+station 1 against each other (the pair of unmoved stations).
+
+Then the same question on hive's two bags of one layout (its OptiTrack as the judge): each
+bag solved with its broadcast OOTX values in our convention, with the curve negated (the
+firmware's sign) and with the gib flipped; the two solves' station 1 against each other and
+each bag tracked through its own stations against its OptiTrack
+(``benchmarks/hive_pair.py``'s measure). Writes docs/results/lh1_curve_sign.md. Data:
+Crazyflie and hive (no licence: read from ../shared only). ~4 min.
 """
 
 from __future__ import annotations
@@ -37,7 +42,8 @@ import numpy as np
 
 from benchmarks import begin, write_results
 from benchmarks.anchored_stations import anchored, cells, geometry, station_1
-from benchmarks.compare_pairs import imported_logs
+from benchmarks.compare_pairs import DATA, imported, imported_logs
+from benchmarks.hive_pair import BAGS, pair_row, tracked_error
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.model.bitcraze import firmware_equivalent
 from lhgraph.model.calibration import StationCalibration, load_calibration, save_calibration
@@ -63,17 +69,52 @@ VARIANTS = {
 """Per variant, our factory model from the imported (default) one."""
 
 
-def variant_calibration(work: Path, name: str) -> Path:
-    """The imported log ``work``'s ``ootx.toml`` under variant ``name``, written beside it."""
+HIVE_VARIANTS = {
+    "broadcast, our convention (default)": lambda c: c,
+    "curve negated (the firmware's sign)": lambda c: replace(c, curve=-np.asarray(c.curve)),
+    "gib flipped": lambda c: replace(c, gibphase=np.asarray(c.gibphase) + np.pi),
+}
+"""Per variant, hive's factory model from the imported one."""
+
+
+def variant_calibration(work: Path, name: str, variants: dict = VARIANTS) -> Path:
+    """The imported log ``work``'s ``ootx.toml`` under variant ``name`` of ``variants``,
+    written beside it."""
     cal: dict[int, StationCalibration] = load_calibration(work / "ootx.toml")
-    out = work / f"ootx-variant-{list(VARIANTS).index(name)}.toml"
-    return save_calibration({k: replace(c, calibration=VARIANTS[name](c.calibration))
+    out = work / f"ootx-variant-{list(variants).index(name)}.toml"
+    return save_calibration({k: replace(c, calibration=variants[name](c.calibration))
                              for k, c in cal.items()}, out, overwrite=True)
+
+
+def hive_rows(work: Path) -> list[str]:
+    """hive's bags under each of :data:`HIVE_VARIANTS`: the pair row, then per bag the track
+    error through its own stations (table rows)."""
+    folders = [imported("hive", DATA / "hive-env8" / f"{bag}.bag", work / bag)
+               for bag in BAGS]
+    pairs, tracks = [], []
+    for name in HIVE_VARIANTS:
+        calibrations = [variant_calibration(f, name, HIVE_VARIANTS) for f in folders]
+        results = [run_config(SolveConfig(board=f / "board.toml", angles=f / "angles.csv",
+                                          calibration=c, graph=GraphOptions()))
+                   for f, c in zip(folders, calibrations, strict=True)]
+        pairs.append(pair_row(name, [r.stations for r in results]))
+        for f, c, r in zip(folders, calibrations, results, strict=True):
+            tracks.append(f"| {name} | {f.name} | {r.final_error:.0f} | "
+                          f"{tracked_error(f, r.stations, c)} |")
+            print(tracks[-1], flush=True)
+    return ["", "## hive: the same signs against its OptiTrack", "",
+            "Station 1, data8.17 less data8.11 (as `hive_pair`).", "",
+            "| model | dp (mm) | dR (deg) | combined honest sigma (mm / deg) | dp / sigma "
+            "| dR / sigma | dp x / y / z (mm) |", "|---|---|---|---|---|---|---|", *pairs, "",
+            "Each bag tracked through its own stations, error against its OptiTrack after "
+            "the world, hand-eye and time-offset alignment (mm / deg), rms and median; the "
+            "solve's cost.", "",
+            "| model | bag | solve's cost | rms | median |", "|---|---|---|---|---|", *tracks]
 
 
 def main(argv: list[str] | None = None) -> int:
     _, out, started, lines = begin(__file__, __doc__, argv,
-                                   "LH1 factory-term signs on the Bitcraze logs")
+                                   "LH1 factory-term signs judged by a mocap")
     lines += [f"{date.today()}; each LH1 log solved (default graph) under four factory "
               "models from its `system-config.yaml` (benchmarks/lh1_curve_sign.py) and "
               "judged against its Qualisys path (the anchored resection, same model). "
@@ -117,6 +158,11 @@ def main(argv: list[str] | None = None) -> int:
             a, b = LOGS
             lines.append(f"| {name} | {cells(truth[name][a], truth[name][b])} | "
                          f"{cells(ours[name][a], ours[name][b])} |")
+    if all((DATA / "hive-env8" / f"{bag}.bag").exists() for bag in BAGS):
+        with tempfile.TemporaryDirectory(prefix="lhgraph-curve-hive-") as tmp:
+            lines += hive_rows(Path(tmp))
+    else:
+        lines += ["", "hive: skipped, its bags are absent."]
     return write_results(out, lines, started)
 
 
