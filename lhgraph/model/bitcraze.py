@@ -5,18 +5,15 @@ Factory calibration (LH1): a cfclient system configuration stores per station
 ogeemag`` (rad): the station's OOTX values as broadcast. In our model's terms
 (:mod:`lhgraph.model.lh1`, default :class:`~lhgraph.model.factory.Convention`) they are
 
-    phase  = phase_bc            tilt   = tilt_bc             curve = s * curve_bc
+    phase  = phase_bc            tilt   = tilt_bc             curve = curve_bc
     gibmag = gibmag_bc           gibphase = gibphase_bc + pi + phase_bc
 
 (the firmware's gib term is a function of the angle before the phase is taken off, ours of
-the angle after). The curve's sign ``s`` is a choice (:class:`Lh1Curve`). The deck
-firmware applies the curve with the opposite sign to the one that fits real recordings:
-``Lh1Curve.FIRMWARE`` (``s = -1``) reproduces the firmware's ``correctedAngle`` to a few
-µrad (median) on the real LH1 log, while ``Lh1Curve.BROADCAST`` (``s = +1``, the default:
-the broadcast value in the convention that fits libsurvive's and hive's recordings) fits the
-Bitcraze logs' own mocap better on both logs and shortens neither the baseline nor the
-pair's agreement as much (docs/model.md, results/lh1_curve_sign.md). The ogee terms are
-LH2 only and must be zero here.
+the angle after). The deck firmware applies the curve with the opposite sign
+(:func:`firmware_equivalent` gives its model, which reproduces its ``correctedAngle`` to a
+few µrad median on the real LH1 log); the broadcast sign, in our convention, fits the
+Bitcraze logs' own Qualisys paths and hive's OptiTrack better (docs/model.md,
+docs/results/lh1_curve_sign.md). The ogee terms are LH2 only and must be zero here.
 
 Factory calibration (LH2): our terms *are* Bitcraze's (:mod:`lhgraph.model.lh2` states the
 model in them); the deck firmware's correction of the real LH2 log is reproduced to 0.2
@@ -32,7 +29,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from enum import Enum
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -46,24 +42,14 @@ Array = NDArray[np.float64]
 BITCRAZE_KEYS = ("phase", "tilt", "curve", "gibphase", "gibmag", "ogeephase", "ogeemag")
 
 
-class Lh1Curve(Enum):
-    """The sign an LH1 ``curve`` of Bitcraze's files takes in our model: ``BROADCAST`` keeps
-    the broadcast value (the sign that fits the recordings, the default), ``FIRMWARE``
-    negates it as the deck firmware's correction does (reproducing its ``correctedAngle``)."""
-
-    BROADCAST = 1.0
-    FIRMWARE = -1.0
-
-
 def _wrap(angle: Array) -> Array:
     return np.mod(np.asarray(angle, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
 
 
 def calibration_from_bitcraze(sweeps: Sequence[Mapping[str, float]],
-                              source: str | None = None,
-                              curve: Lh1Curve = Lh1Curve.BROADCAST) -> FactoryCalibration:
+                              source: str | None = None) -> FactoryCalibration:
     """Our :class:`FactoryCalibration` from Bitcraze's two LH1 sweep dictionaries
-    (``[axis0, axis1]``, keys :data:`BITCRAZE_KEYS`; rad), the curve signed by ``curve``.
+    (``[axis0, axis1]``, keys :data:`BITCRAZE_KEYS`; rad; the curve as broadcast).
     InputError naming ``source`` if a key is missing or an ogee term is non-zero (LH2
     calibration)."""
     if len(sweeps) != 2:
@@ -80,26 +66,24 @@ def calibration_from_bitcraze(sweeps: Sequence[Mapping[str, float]],
     if np.any(values["ogeephase"]) or np.any(values["ogeemag"]):
         raise InputError("ogee terms are set: that is an LH2 calibration", source)
     return FactoryCalibration(
-        phase=values["phase"], tilt=values["tilt"], curve=curve.value * values["curve"],
+        phase=values["phase"], tilt=values["tilt"], curve=values["curve"],
         gibphase=_wrap(values["gibphase"] + np.pi + values["phase"]),
         gibmag=values["gibmag"])
 
 
 def firmware_equivalent(calibration: FactoryCalibration) -> FactoryCalibration:
     """The LH1 ``calibration`` (our terms, the broadcast curve) as the deck firmware applies
-    it: the curve negated (:class:`Lh1Curve`). Its correction reproduces ``correctedAngle``."""
-    return replace(calibration, curve=Lh1Curve.FIRMWARE.value * np.asarray(calibration.curve))
+    it: the curve negated. Its correction reproduces the firmware's ``correctedAngle``."""
+    return replace(calibration, curve=-np.asarray(calibration.curve))
 
 
-def calibration_to_bitcraze(calibration: FactoryCalibration,
-                            curve: Lh1Curve = Lh1Curve.BROADCAST) -> list[dict[str, float]]:
+def calibration_to_bitcraze(calibration: FactoryCalibration) -> list[dict[str, float]]:
     """Bitcraze's two sweep dictionaries (keys :data:`BITCRAZE_KEYS`, rad) of our LH1
-    calibration: the inverse of :func:`calibration_from_bitcraze` under the same ``curve``
-    (the default writes the broadcast values back)."""
+    calibration: the inverse of :func:`calibration_from_bitcraze` (the broadcast values)."""
     c = calibration
     gibphase = _wrap(c.gibphase - np.pi - c.phase)
     return [{"phase": float(c.phase[k]), "tilt": float(c.tilt[k]),
-             "curve": float(curve.value * c.curve[k]), "gibphase": float(gibphase[k]),
+             "curve": float(c.curve[k]), "gibphase": float(gibphase[k]),
              "gibmag": float(c.gibmag[k]), "ogeephase": 0.0, "ogeemag": 0.0}
             for k in (0, 1)]
 
