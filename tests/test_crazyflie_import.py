@@ -315,6 +315,7 @@ def test_mapping_reproduces_corrected_angle():
 def test_real_import_end_to_end(tmp_path):
     r = import_crazyflie(LH1 / "log02", tmp_path, LH1 / "system-config.yaml")
     assert r.notes == () and r.version == 2
+    assert "the curve with its broadcast sign" in r.summary()
     assert r.sweeps.repeats[0] > 5000 and r.sweeps.repeats[1] < 100
     a = load_angles(tmp_path / "angles.csv")
     for bs in (0, 1):

@@ -75,6 +75,11 @@ class CrazyflieImport:
         if self.mocap is not None:
             lines.append(f"mocap: {len(self.mocap.time)} samples on the written clock (clock rate "
                          f"{self.mocap.rate:.6f}), {self.mocap.n_unseen} unseen left out")
+        if "ootx" in self.paths and self.system_type == 1:
+            lines.append("calibration: the system configuration's OOTX terms, the curve with "
+                         "its broadcast sign (the deck firmware negates it, so our corrected "
+                         "angles differ from its correctedAngle by twice the curve term; "
+                         "docs/crazyflie.md#the-lh1-curves-sign)")
         lines += [f"not written: {s}" for s in self.skipped]
         lines += [f"wrote {p}" for p in self.paths.values()]
         return "\n".join(lines)
