@@ -76,11 +76,14 @@ def solved_logs(logs: tuple[str, ...], work: Path
         yield log, folder, None if folder is None else solve_imported(folder, GraphOptions())
 
 
-def solve_imported(work: Path, options: GraphOptions) -> SolveResult:
-    """Solve an imported log folder ``work`` with its factory calibration through the Python
-    API (the default graph method under ``options``)."""
+def solve_imported(work: Path, options: GraphOptions, calibration: Path | None = None
+                   ) -> SolveResult:
+    """Solve an imported log folder ``work`` with its factory calibration (or the
+    ``ootx.toml`` ``calibration``) through the Python API (the default graph method under
+    ``options``)."""
     return run_config(SolveConfig(board=work / "board.toml", angles=work / "angles.csv",
-                                  calibration=work / "ootx.toml", graph=options))
+                                  calibration=calibration or work / "ootx.toml",
+                                  graph=options))
 
 
 def solved(kind: str, source: Path, work: Path, *options: str) -> Path:

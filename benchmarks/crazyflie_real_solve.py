@@ -71,20 +71,25 @@ def run_tracks(tracks: dict[str, tuple[Path, list[str]]], imp: Path, work: Path
     line of each (a failed verdict, exit 3, still writes the track)."""
     seconds = {}
     items = list(tracks.items())
+
+    def start(i: int, stations: Path, extra: list[str]) -> tuple[Path, subprocess.Popen]:
+        log = work / f"track-{i}.log"
+        with log.open("w") as out:
+            return log, subprocess.Popen(
+                [sys.executable, "-m", "lhgraph", "track", "--stations", str(stations),
+                 "--board", str(imp / "board.toml"), "--angles", str(imp / "angles.csv"),
+                 "--calibration", str(imp / "ootx.toml"), "--output",
+                 str(work / f"track-{i}.csv"), "--force", *extra],
+                stdout=out, stderr=subprocess.STDOUT)
+
     for first in range(0, len(items), 2):
         tic = time.perf_counter()
-        running = {name: subprocess.Popen(
-            [sys.executable, "-m", "lhgraph", "track", "--stations", str(stations), "--board",
-             str(imp / "board.toml"), "--angles", str(imp / "angles.csv"), "--calibration",
-             str(imp / "ootx.toml"), "--output", str(work / f"track-{first + i}.csv"),
-             "--force", *extra], stdout=(work / f"track-{first + i}.log").open("w"),
-            stderr=subprocess.STDOUT)
-            for i, (name, (stations, extra)) in enumerate(items[first:first + 2])}
+        running = {name: start(first + i, stations, extra)
+                   for i, (name, (stations, extra)) in enumerate(items[first:first + 2])}
         while len(seconds) < first + len(running):  # each track's own end
-            for name, proc in running.items():
+            for name, (log, proc) in running.items():
                 if name not in seconds and proc.poll() is not None:
-                    i = list(running).index(name)
-                    text = (work / f"track-{first + i}.log").read_text()
+                    text = log.read_text()
                     if proc.returncode not in (0, 3):
                         raise SystemExit(f"lhgraph track failed: {text.strip()[-300:]}")
                     verdict = next((ln.removeprefix("verdict: ") for ln in text.splitlines()

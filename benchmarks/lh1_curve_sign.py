@@ -42,14 +42,12 @@ import numpy as np
 
 from benchmarks import begin, write_results
 from benchmarks.anchored_stations import anchored, cells, geometry, station_1
-from benchmarks.compare_pairs import DATA, imported, imported_logs
+from benchmarks.compare_pairs import DATA, imported, imported_logs, solve_imported
 from benchmarks.hive_pair import BAGS, pair_row, tracked_error
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.model.bitcraze import firmware_equivalent
 from lhgraph.model.calibration import StationCalibration, load_calibration, save_calibration
 from lhgraph.model.station import FactoryCalibration
-from lhgraph.workflow.solve import run_config
-from lhgraph.workflow.solve_config import SolveConfig
 
 LOGS = ("lh1_crossingBeam_move/log02", "lh1_crossingBeam_flight/log00")
 
@@ -71,7 +69,7 @@ VARIANTS = {
 
 HIVE_VARIANTS = {
     "broadcast, our convention (default)": lambda c: c,
-    "curve negated (the firmware's sign)": lambda c: replace(c, curve=-np.asarray(c.curve)),
+    "curve negated (the firmware's sign)": firmware_equivalent,
     "gib flipped": lambda c: replace(c, gibphase=np.asarray(c.gibphase) + np.pi),
 }
 """Per variant, hive's factory model from the imported one."""
@@ -94,8 +92,7 @@ def hive_rows(work: Path) -> list[str]:
     pairs, tracks = [], []
     for name in HIVE_VARIANTS:
         calibrations = [variant_calibration(f, name, HIVE_VARIANTS) for f in folders]
-        results = [run_config(SolveConfig(board=f / "board.toml", angles=f / "angles.csv",
-                                          calibration=c, graph=GraphOptions()))
+        results = [solve_imported(f, GraphOptions(), c)
                    for f, c in zip(folders, calibrations, strict=True)]
         pairs.append(pair_row(name, [r.stations for r in results]))
         for f, c, r in zip(folders, calibrations, results, strict=True):
@@ -132,9 +129,8 @@ def main(argv: list[str] | None = None) -> int:
                 lines.append(f"| {log} | skipped: data absent |" + " |" * 9)
                 continue
             for name in VARIANTS:
-                result = run_config(SolveConfig(
-                    board=work / "board.toml", angles=work / "angles.csv",
-                    calibration=variant_calibration(work, name), graph=GraphOptions()))
+                result = solve_imported(work, GraphOptions(),
+                                        variant_calibration(work, name))
                 ref = anchored(work, result.stations, result.trajectory)
                 ours[name][log] = station_1(geometry(result.stations))
                 truth[name][log] = station_1(ref.T_mocap_lh)
