@@ -70,6 +70,9 @@ def test_unmodelled_phase_error_shifts_the_station_as_predicted(ideal):
     xi = se3_log(inverse(result.stations.pose(1)) @ moved.stations.pose(1))
     predicted_mm = f["station_shift_mm_per_mrad"][j] * delta * 1e3
     assert np.linalg.norm(xi[3:]) * 1e3 == pytest.approx(predicted_mm, rel=0.15)
+    # the full tangent shift, rotation and direction too
+    predicted = np.array(f["station_shift_per_rad"][1])[:, j] * delta
+    assert np.linalg.norm(xi - predicted) < 0.15 * np.linalg.norm(predicted)
 
 
 def test_lh2_common_phase_cannot_be_told_from_a_yaw():

@@ -28,6 +28,7 @@ point); on real data the same factor as the stations' honest-to-white ratio appl
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -72,10 +73,10 @@ class FactoryInformation:
     others or the poses, :func:`joint_covariance`), ``pose_correlation``
     (largest |correlation| with a station-pose coordinate, ``pose_coordinate`` which:
     ``station 1 tz``), and ``station_shift`` ``(6 S, P)``: the stations' tangent shift
-    ``[rx, ry, rz, tx, ty, tz]`` per station slot but the reference's, per rad of the term's
-    error. ``unused``: the terms no residual depends on at the point (those the measurement
-    model does not apply, such as LH2's curve and ogee, and a gib phase whose magnitude is
-    zero), left out of the rest."""
+    ``[rx, ry, rz, tx, ty, tz]`` per station slot but the reference's (their indices:
+    ``shifted``), per rad of the term's error. ``unused``: the terms no residual depends on
+    at the point (those the measurement model does not apply, such as LH2's curve and ogee,
+    and a gib phase whose magnitude is zero), left out of the rest."""
 
     terms: list[FactoryTerm]
     sigma_alone_rad: Array
@@ -85,6 +86,7 @@ class FactoryInformation:
     pose_coordinate: list[str]
     station_shift: Array
     unused: list[FactoryTerm]
+    shifted: list[int]
 
     @property
     def sigma_joint_rad(self) -> Array:
@@ -97,10 +99,11 @@ class FactoryInformation:
         return np.max(np.linalg.norm(pos, axis=1), axis=0) if len(pos) else np.zeros(
             len(self.terms))
 
-    def as_dict(self) -> dict[str, list]:
+    def as_dict(self) -> dict[str, Any]:
         """Per term (``terms``: their names) the sigmas (rad), the largest pose correlation
-        and its coordinate, the largest station shift (mm per mrad): a result's
-        ``factory_information``."""
+        and its coordinate, the largest station shift (mm per mrad), and by station index
+        its tangent shift per rad of each term (``station_shift_per_rad``: 6 rows, one
+        column per term): a result's ``factory_information``."""
         return {"terms": [t.name for t in self.terms],
                 "sigma_alone_rad": self.sigma_alone_rad.tolist(),
                 "sigma_free_rad": self.sigma_free_rad.tolist(),
@@ -108,6 +111,9 @@ class FactoryInformation:
                 "pose_correlation": self.pose_correlation.tolist(),
                 "pose_coordinate": list(self.pose_coordinate),
                 "station_shift_mm_per_mrad": self.station_shift_mm_per_mrad().tolist(),
+                "station_shift_per_rad": {
+                    sid: self.station_shift[6 * i:6 * i + 6].tolist()
+                    for i, sid in enumerate(self.shifted)},
                 "unused": [t.name for t in self.unused]}
 
 
@@ -190,7 +196,8 @@ def factory_information(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                   for b, ok in zip(best, known, strict=True)]
     with np.errstate(divide="ignore"):
         alone, free = (1.0 / np.sqrt(np.maximum(np.diag(M), 0.0)) for M in (D, info))
-    return FactoryInformation(terms, alone, free, cov, correlation, coordinate, shift, unused)
+    return FactoryInformation(terms, alone, free, cov, correlation, coordinate, shift, unused,
+                              [int(i) for i in ids])
 
 
 def joint_covariance(info: Array, rtol: float = 1e-10) -> Array:
