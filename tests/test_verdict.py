@@ -98,6 +98,22 @@ def test_verdict_status_and_reasons_name_their_cause():
     assert g.failed and "not g" in g.text()
 
 
+def test_an_imu_track_is_judged_by_its_own_misfit_not_the_light_only_calibrations():
+    # the shared LH1 hand-held log tracked with its IMU through its own calibration: 404 urad
+    # at 3.6 m (1.44 mm), 7x the light-only calibration's 57 urad, and the most accurate path
+    rng = np.random.default_rng(1)
+    n = 4000
+    res = Residuals(np.arange(n) * 0.01, np.zeros(n, int), np.arange(n) % 2, np.zeros(n, int),
+                    rng.normal(0, 404e-6, n), np.ones(n))
+    with_imu = track_verdict("converged", 10, res, 3.6, 9.81, 57.0, 0.02)
+    assert with_imu.ok, with_imu.text()
+    light = track_verdict("converged", 10, res, 3.6, calibration_spread_urad=57.0)
+    assert light.failed and "x the calibration's 57" in light.text()
+    # with the IMU, another room's misfit still fails (89 mm residual-equivalent at 3.6 m)
+    far = dataclasses.replace(res, residual_rad=rng.normal(0, 0.025, n))
+    assert track_verdict("converged", 10, far, 3.6, 9.81, 57.0, 0.02).failed
+
+
 def test_a_wide_sigma_names_the_receivers_size_when_that_is_most_of_it():
     summary = _summary()
     summary["stations"]["1"] = {"sigma_position_mm": [3.0, 24.0, 3.0],

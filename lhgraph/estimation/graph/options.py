@@ -156,9 +156,7 @@ class ImuOptions:
     ``imu_rotation_sigma_rad`` / ``imu_position_sigma_m``: when positive, the IMU's per-axis
     gyro scale error, its time offset to the light (s), its frame's rotation in the board's
     and its position in the board frame (m) are solved with this prior spread (0: not
-    estimated; ``gyro_scale_sigma`` None: resolved, ``TRACK_GYRO_SCALE_SIGMA`` of
-    :mod:`~lhgraph.estimation.graph.resolve` when tracking with the IMU's own factors, else
-    not estimated)."""
+    estimated)."""
 
     gyro_sigma_rad_s: float = option(0.02, gt=0)
     accel_sigma_mps2: float = option(0.5, gt=0)
@@ -169,7 +167,7 @@ class ImuOptions:
     gyro_preintegration: bool = option(False)
     adapt_gyro_sigma: bool = option(True)
     min_gyro_sigma_rad_s: float = option(5e-4, gt=0)
-    gyro_scale_sigma: float | None = option(None, kind=float, ge=0)
+    gyro_scale_sigma: float = option(0.0, ge=0)
     imu_time_offset_sigma_s: float = option(0.0, ge=0)
     imu_rotation_sigma_rad: float = option(0.0, ge=0)
     imu_position_sigma_m: float = option(0.0, ge=0)
@@ -189,7 +187,7 @@ class ImuOptions:
     @property
     def calibrated(self) -> bool:
         """Whether the graph solves an IMU calibration (any of its four sigmas set)."""
-        return ((self.gyro_scale_sigma or 0.0) > 0 or self.imu_time_offset_sigma_s > 0
+        return (self.gyro_scale_sigma > 0 or self.imu_time_offset_sigma_s > 0
                 or self.imu_rotation_sigma_rad > 0 or self.imu_position_sigma_m > 0)
 
     @property

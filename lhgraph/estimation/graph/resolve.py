@@ -13,24 +13,18 @@ kept in its result and ``summary.json``):
    ``FEW_DIODE_CALIBRATION`` (``FEW_DIODE_TRACKING`` when tracking);
 3. the stopping rule's still unset station tolerance is ``STEP_TOLERANCE_SIGMA`` and its
    board-step quantile 1 (every state);
-4. ``gyro_scale_sigma`` unset, tracking with the IMU's twist factors:
-   ``TRACK_GYRO_SCALE_SIGMA`` (unset elsewhere: not estimated). With the stations held the
-   light fixes the path, and with it the gyro's scale; a gyro taken as read pulls the path
-   off the light (the shared recordings' IMU tracks: hive's gyro reads twice the rate and
-   its track diverged, the Crazyflie logs' spread 140-404 urad instead of 56-74,
-   benchmarks/track_verdicts.py);
-5. ``motion_prior_estimate = "auto"``: ``"redundancy"`` on few-diode data without IMU
+4. ``motion_prior_estimate = "auto"``: ``"redundancy"`` on few-diode data without IMU
    factors, ``"chi2"`` otherwise;
-6. ``accel_sigma_estimate = "auto"``: ``"redundancy"`` on few-diode data or with the IMU
+5. ``accel_sigma_estimate = "auto"``: ``"redundancy"`` on few-diode data or with the IMU
    calibration solved, ``"stream"`` otherwise;
-7. ``imu_factors = "auto"`` (with IMU factors): ``"twist"`` when the IMU calibration is
+6. ``imu_factors = "auto"`` (with IMU factors): ``"twist"`` when the IMU calibration is
    solved or the gyro preintegrated, ``"combined"`` otherwise;
-8. ``reference`` unset: the lowest station index seen;
-9. ``board_scale_sigma`` > 0 in a calibration without IMU factors (the light-only stage
+7. ``reference`` unset: the lowest station index seen;
+8. ``board_scale_sigma`` > 0 in a calibration without IMU factors (the light-only stage
    before the IMU refinement): 0. Angles cannot see the board's scale, and a free scale
    shrinks under the motion prior (smaller accelerations cost less: on a simulated deck
    capture it ran to -73 %); the IMU stage solves it;
-10. ``receiver_scale_sigma`` unset: ``FEW_DIODE_SCALE_SIGMA`` on few-diode data whose board
+9. ``receiver_scale_sigma`` unset: ``FEW_DIODE_SCALE_SIGMA`` on few-diode data whose board
    scale is not solved (``board_scale_sigma`` 0), else 0. A few-diode deck's size sets the
    scale of everything solved from it, and on the shared Crazyflie logs the mocap puts our
    station 1 0.38-0.84 % too close (benchmarks/anchored_stations.py, docs/uncertainty.md).
@@ -55,9 +49,6 @@ data whose median sweep holds fewer is few-diode."""
 STEP_TOLERANCE_SIGMA = 0.05
 """The stations' test of the stopping rule where the options leave it unset: LM stops when
 they are estimated within this many standard deviations of convergence."""
-TRACK_GYRO_SCALE_SIGMA = 0.5
-"""The gyro scale's prior spread (relative) a track with an IMU solves where the options hold
-it: wide, the light determines it (hive's tracker gyro: 0.50)."""
 FEW_DIODE_SCALE_SIGMA = 0.006
 """The receiver-scale uncertainty (relative) of few-diode data: the rms of station 1's
 shortfall along the baseline against the mocap-anchored stations on the four shared
@@ -173,25 +164,19 @@ def resolve_options(options: GraphOptions, facts: DataFacts, inertial: bool = Fa
         set_to("step_tolerance_sigma", STEP_TOLERANCE_SIGMA, "unset: the default")
     if flat["board_step_quantile"] is None:
         set_to("board_step_quantile", 1.0, "unset: every state")
-    if (flat["gyro_scale_sigma"] is None and tracking and inertial
-            and flat["imu_factors"] != "combined"):
-        set_to("gyro_scale_sigma", TRACK_GYRO_SCALE_SIGMA,
-               "unset, tracking with an IMU: the held stations' light determines the gyro's "
-               "scale")
-    imu = (options.with_values(**new) if new else options).imu
     if flat["motion_prior_estimate"] == "auto":
         set_to("motion_prior_estimate",
                "redundancy" if facts.few_diode and not inertial else "chi2",
                "auto: few-diode data without IMU factors" if facts.few_diode and not inertial
                else "auto")
     if flat["accel_sigma_estimate"] == "auto":
-        calibrated = imu.calibrated
+        calibrated = options.imu.calibrated
         set_to("accel_sigma_estimate",
                "redundancy" if facts.few_diode or calibrated else "stream",
                "auto: few-diode data or the IMU calibration solved"
                if facts.few_diode or calibrated else "auto")
     if inertial and flat["imu_factors"] == "auto":
-        set_to("imu_factors", imu.factor_kind, "auto")
+        set_to("imu_factors", options.imu.factor_kind, "auto")
     if flat["reference"] is None:
         set_to("reference", facts.first_station, "unset: the lowest station index seen")
     if flat["board_scale_sigma"] > 0 and not inertial and not tracking:

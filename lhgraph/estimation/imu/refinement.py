@@ -114,7 +114,7 @@ def refine_with_imu(problem: GraphProblem, resolution: Resolution, auto: bool,
     found: dict[str, float] = {}
     if options.imu.calibration_from_light:
         calibration = fit_imu_calibration(
-            imu, problem.state_time, refined.X, scale=(options.imu.gyro_scale_sigma or 0.0) > 0,
+            imu, problem.state_time, refined.X, scale=options.imu.gyro_scale_sigma > 0,
             offset=options.imu.imu_time_offset_sigma_s > 0,
             rotation=options.imu.imu_rotation_sigma_rad > 0)
         imu = calibration.apply(imu)
