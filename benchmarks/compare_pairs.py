@@ -42,6 +42,11 @@ PAIRS = {
 }
 
 
+def recordings() -> list[tuple[str, str]]:
+    """Every recording of :data:`PAIRS`, pair by pair: ``(kind, path under DATA)``."""
+    return [recording for logs in PAIRS.values() for recording in logs]
+
+
 def lhgraph(*args: str) -> subprocess.CompletedProcess:
     """``python -m lhgraph ARGS`` with this checkout's package."""
     return subprocess.run([sys.executable, "-m", "lhgraph", *args], cwd=ROOT,

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import begin, write_results
-from benchmarks.compare_pairs import DATA, DEG, PAIRS, imported
+from benchmarks.compare_pairs import DATA, DEG, imported, recordings
 from lhgraph.estimation.graph.options import GraphOptions
 from lhgraph.estimation.graph.resolve import STEP_TOLERANCE_SIGMA
 from lhgraph.estimation.graph.solver import solve_graph
@@ -84,13 +84,12 @@ def main(argv: list[str] | None = None) -> int:
                                    "Does the answer depend on where the solve starts?")
     rows = []
     with tempfile.TemporaryDirectory(prefix="lhgraph-start-") as tmp:
-        for n, (_, logs) in enumerate(PAIRS.items()):
-            for i, (kind, path) in enumerate(logs):
-                if not (DATA / path).exists():
-                    rows.append(f"| {path} | skipped: data absent | | | | | | |")
-                    continue
-                rows.append(row(imported(kind, DATA / path, Path(tmp) / f"{n}{i}"), path))
-                print(rows[-1], flush=True)
+        for n, (kind, path) in enumerate(recordings()):
+            if not (DATA / path).exists():
+                rows.append(f"| {path} | skipped: data absent | | | | | | |")
+                continue
+            rows.append(row(imported(kind, DATA / path, Path(tmp) / str(n)), path))
+            print(rows[-1], flush=True)
     lines += [f"{date.today()}; the default graph solve of each recording (1: from scratch), "
               "again from its own answer (2) and from scratch with the stopping rule "
               "tightened a hundredfold (3); station 1 (relative to the reference) from "

@@ -22,7 +22,7 @@ from datetime import date
 from pathlib import Path
 
 from benchmarks import begin, write_results
-from benchmarks.compare_pairs import DATA, PAIRS, lhgraph, solved
+from benchmarks.compare_pairs import DATA, lhgraph, recordings, solved
 from lhgraph.io.stations import load_stations
 
 SPREAD = re.compile(r"robust spread ([\d.]+) µrad = ([\d.]+) mm .* inlier fraction ([\d.]+)")
@@ -58,16 +58,15 @@ def main(argv: list[str] | None = None) -> int:
                                    "Track verdicts through each recording's own calibration")
     rows = []
     with tempfile.TemporaryDirectory(prefix="lhgraph-tracks-") as tmp:
-        for n, (_, logs) in enumerate(PAIRS.items()):
-            for i, (kind, path) in enumerate(logs):
-                if not (DATA / path).exists():
-                    rows.append(f"| {path} | skipped: data absent | | | | | | |")
-                    continue
-                work = Path(tmp) / f"{n}{i}"
-                stations = solved(kind, DATA / path, work)
-                for imu in (False, True):
-                    rows.append(track_row(path, work, stations, imu))
-                    print(rows[-1], flush=True)
+        for n, (kind, path) in enumerate(recordings()):
+            if not (DATA / path).exists():
+                rows.append(f"| {path} | skipped: data absent | | | | | | |")
+                continue
+            work = Path(tmp) / str(n)
+            stations = solved(kind, DATA / path, work)
+            for imu in (False, True):
+                rows.append(track_row(path, work, stations, imu))
+                print(rows[-1], flush=True)
     lines += [f"{date.today()}; each recording solved (light only) and tracked through that "
               "result, from the light alone and with its IMU. Spread: the robust spread of "
               "the angle residuals (µrad; mm at the median range); ratio: to the "
