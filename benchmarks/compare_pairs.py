@@ -22,7 +22,14 @@ from datetime import date
 from pathlib import Path
 
 from lhgraph.estimation.graph.options import GraphOptions
+from lhgraph.estimation.graph.resolve import STEP_TOLERANCE_SIGMA
 from lhgraph.estimation.result import SolveResult
+from lhgraph.estimation.station_watch import CalibrationStart
+from lhgraph.io.angles import Angles, load_angles
+from lhgraph.model.board import Board, load_board
+from lhgraph.model.calibration import load_calibration
+from lhgraph.model.station import StationModel
+from lhgraph.workflow.inputs import models_of
 from lhgraph.workflow.solve import run_config
 from lhgraph.workflow.solve_config import SolveConfig
 
@@ -89,6 +96,25 @@ def solve_imported(work: Path, options: GraphOptions, calibration: Path | None =
     return run_config(SolveConfig(board=work / "board.toml", angles=work / "angles.csv",
                                   calibration=calibration or work / "ootx.toml",
                                   graph=options))
+
+
+TIGHT = GraphOptions.of(covariance="white", step_tolerance_sigma=STEP_TOLERANCE_SIGMA / 100,
+                        relative_tolerance=1e-9)
+"""The default graph with the stopping rule tightened a hundredfold (station step tolerance
+and relative error decrease) and the white covariance: for differences of solves that the
+default stop's tolerance would otherwise show in."""
+
+
+def imported_inputs(work: Path) -> tuple[Board, Angles, dict[int, StationModel]]:
+    """An imported log folder's board, angles and station models (its ``ootx.toml``)."""
+    return (load_board(work / "board.toml"), load_angles(work / "angles.csv"),
+            models_of(load_calibration(work / "ootx.toml")))
+
+
+def start_at(result: SolveResult) -> CalibrationStart:
+    """A solve's start at ``result``'s stations and receiver path."""
+    return CalibrationStart(result.stations, result.stations.reference,
+                            result.trajectory.time, result.trajectory.T_world_board)
 
 
 def solved(kind: str, source: Path, work: Path, *options: str) -> Path:

@@ -43,20 +43,24 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import command, results_parser, write_results
-from benchmarks.compare_pairs import DATA, DEG, PAIRS, imported, solve_imported
+from benchmarks.compare_pairs import (
+    DATA,
+    DEG,
+    PAIRS,
+    TIGHT,
+    imported,
+    imported_inputs,
+    solve_imported,
+    start_at,
+)
 from lhgraph.estimation.graph.families.factory import with_term_deltas
 from lhgraph.estimation.graph.options import FactoryOptions, GraphOptions
-from lhgraph.estimation.graph.resolve import STEP_TOLERANCE_SIGMA
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.layout_compare import compare_layouts
-from lhgraph.estimation.station_watch import CalibrationStart
+from lhgraph.estimation.result import SolveResult
 from lhgraph.geometry.transforms import inverse, se3_log
-from lhgraph.io.angles import load_angles
 from lhgraph.io.files import check_writable
 from lhgraph.io.stations import Stations
-from lhgraph.model.board import load_board
-from lhgraph.model.calibration import load_calibration
-from lhgraph.workflow.inputs import models_of
 
 TERMS = ("phase", "tilt", "curve", "gibmag")
 STEP_RAD = 1e-3
@@ -91,29 +95,25 @@ def sensitivity(folder: Path) -> Sensitivity:
     _, m = chosen[largest]
     return Sensitivity(result.stations, K, labels,
                        (labels[largest], float(np.linalg.norm(K[3:, largest])) * STEP_RAD * 1e3,
-                        resolved_shift_mm(folder, int(m[1]), m[2], int(m[3]))))
+                        resolved_shift_mm(folder, result, int(m[1]), m[2], int(m[3]))))
 
 
-def resolved_shift_mm(folder: Path, station: int, term: str, axis: int) -> float:
+def resolved_shift_mm(folder: Path, first: SolveResult, station: int, term: str, axis: int
+                      ) -> float:
     """Station 1's position shift (mm) per :data:`STEP_RAD` of one term of ``station``: the
     central difference of ``folder``'s log solved again with the term moved by plus and
-    minus the step, both started from a first solve (white covariance, the stopping rule
-    tightened a hundredfold: its tolerance would otherwise show in the difference)."""
-    board, angles = load_board(folder / "board.toml"), load_angles(folder / "angles.csv")
-    models = models_of(load_calibration(folder / "ootx.toml"))
-    white = GraphOptions().with_values(covariance="white")
-    base = solve_graph(board, angles, models, white)
-    start = CalibrationStart(base.stations, base.stations.reference, base.trajectory.time,
-                             base.trajectory.T_world_board)
-    tight = white.with_values(step_tolerance_sigma=STEP_TOLERANCE_SIGMA / 100,
-                              relative_tolerance=1e-9)
+    minus the step, both started from its first solve ``first`` (white covariance, the
+    stopping rule tightened a hundredfold: its tolerance would otherwise show in the
+    difference)."""
+    board, angles, models = imported_inputs(folder)
+    start = start_at(first)
     poses = []
     for sign in (1.0, -1.0):
         delta = np.zeros(2)
         delta[axis] = sign * STEP_RAD
         moved = dict(models)
         moved[station] = with_term_deltas(models[station], (term,), delta)
-        poses.append(solve_graph(board, angles, moved, tight, initialiser=start
+        poses.append(solve_graph(board, angles, moved, TIGHT, initialiser=start
                                  ).stations.pose(STATION))
     xi = se3_log(inverse(poses[1]) @ poses[0]) / 2
     return float(np.linalg.norm(xi[3:])) * 1e3

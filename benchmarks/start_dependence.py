@@ -32,21 +32,21 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import begin, write_results
-from benchmarks.compare_pairs import DATA, DEG, imported, recordings
+from benchmarks.compare_pairs import (
+    DATA,
+    DEG,
+    TIGHT,
+    imported,
+    imported_inputs,
+    recordings,
+    start_at,
+)
 from lhgraph.estimation.graph.options import GraphOptions
-from lhgraph.estimation.graph.resolve import STEP_TOLERANCE_SIGMA
 from lhgraph.estimation.graph.solver import solve_graph
 from lhgraph.estimation.result import SolveResult
-from lhgraph.estimation.station_watch import CalibrationStart
 from lhgraph.geometry.transforms import inverse, se3_log
-from lhgraph.io.angles import load_angles
-from lhgraph.model.board import load_board
-from lhgraph.model.calibration import load_calibration
-from lhgraph.workflow.inputs import models_of
 
 STATION = 1
-TIGHT = GraphOptions.of(covariance="white", step_tolerance_sigma=STEP_TOLERANCE_SIGMA / 100,
-                        relative_tolerance=1e-9)
 
 
 def distance(a: SolveResult, b: SolveResult) -> str:
@@ -63,13 +63,10 @@ def sigma(cov: np.ndarray) -> str:
 
 def row(folder: Path, name: str) -> str:
     """The table row of the imported recording ``folder``."""
-    board, angles = load_board(folder / "board.toml"), load_angles(folder / "angles.csv")
-    models = models_of(load_calibration(folder / "ootx.toml"))
+    board, angles, models = imported_inputs(folder)
     first = solve_graph(board, angles, models, GraphOptions())
-    start = CalibrationStart(first.stations, first.stations.reference, first.trajectory.time,
-                             first.trajectory.T_world_board)
     again = solve_graph(board, angles, models, GraphOptions.of(covariance="white"),
-                        initialiser=start)
+                        initialiser=start_at(first))
     tight = solve_graph(board, angles, models, TIGHT)
     s = first.stations.stations[STATION]
     noise = [r.diagnostics["angle_sigma_rad"] * 1e6 for r in (first, again, tight)]
